@@ -1,0 +1,43 @@
+# The README's two commands: `make run` (set up, then a short training run) and
+# `make test` (set up, install the system packages the tests need, run the suite).
+PYTHON ?= python3
+VENV   ?= .venv
+BIN    := $(VENV)/bin
+STAMP  := $(VENV)/.installed
+CONFIG ?= configs/muzero_cartpole.yaml
+SYSTEM_PACKAGES := redis-server prometheus libegl1 libegl-mesa0 libgl1-mesa-dri
+export MUJOCO_GL ?= egl
+
+.PHONY: setup system-deps run test bench clean
+
+setup: $(STAMP)
+
+$(STAMP): pyproject.toml
+	$(PYTHON) -m venv $(VENV)
+	$(BIN)/pip install --quiet --upgrade pip
+	$(BIN)/pip install --quiet -e ".[test]"
+	touch $(STAMP)
+
+# Debian packages: redis-server and prometheus are real services the tests start;
+# the EGL libraries render dm_control pixels without a display.
+system-deps:
+	@missing=""; for p in $(SYSTEM_PACKAGES); do \
+	  dpkg -s $$p >/dev/null 2>&1 || missing="$$missing $$p"; done; \
+	if [ -n "$$missing" ]; then \
+	  echo "installing:$$missing"; \
+	  SUDO=""; [ "$$(id -u)" = 0 ] || SUDO=sudo; \
+	  $$SUDO apt-get update -qq && \
+	  DEBIAN_FRONTEND=noninteractive $$SUDO apt-get install -y -qq --no-install-recommends $$missing >/dev/null; \
+	fi
+
+run: setup
+	$(BIN)/wmdist train $(CONFIG)
+
+test: setup system-deps
+	$(BIN)/python -m pytest -q
+
+bench: setup
+	$(BIN)/wmdist bench all --json
+
+clean:
+	rm -rf $(VENV) runs .pytest_cache

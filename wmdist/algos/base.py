@@ -1,0 +1,166 @@
+"""The one interface through which an algorithm plugs into the runtime.
+
+The runtime (collectors, learner, reanalyzers, evaluator) only ever talks to these
+classes; it never branches on an algorithm's name. An algorithm is a folder under
+`wmdist/algos/` whose `Algorithm` subclass is registered in `wmdist/algos/registry.py`
+(or named as `module:Class` in `algo.name`).
+
+Step convention (observation-centric, one record per observation, as in DreamerV3):
+
+    step t = obs_t            observation o_t                          [*obs_shape]
+             reward_t         reward received on arriving at o_t (0 at first)
+             first_t          o_t starts an episode
+             last_t           o_t ends an episode (terminal or truncated)
+             terminal_t       o_t is a true terminal state (no bootstrap beyond it)
+             action_t         action taken at o_t (zeros at a last step)
+             <extras>_t       what the Policy returned at o_t (zeros at a last step)
+
+So MuZero's r_{t+1} is `reward[t+1]`, and a terminal episode stores its final
+observation. Stored sequences are fixed-length windows of one episode; padding after the
+episode's end has `mask = 0`.
+
+Batches handed to `Learner.update` / `Reanalyzer.reanalyze` are dicts of numpy arrays
+shaped `[B, T, ...]` (every stored field) plus `mask [B, T]` (1 where a real step is) and
+`is_weight [B]` (importance weights, 1 for uniform sampling). Keys and stamps stay with
+the runtime.
+"""
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from dataclasses import dataclass, field
+from typing import Any, ClassVar, Mapping
+
+import numpy as np
+
+from wmdist.envs.spec import EnvSpec
+
+Weights = dict[str, np.ndarray]  # a flat state dict as numpy arrays (cheap ray.put, no pickle)
+Batch = dict[str, np.ndarray]  # field -> [B, T, ...], plus mask [B, T] and is_weight [B]
+
+
+@dataclass(frozen=True)
+class FieldSpec:
+    """One per-step field a sequence stores: its shape (without [T]) and numpy dtype name."""
+
+    shape: tuple[int, ...]
+    dtype: str
+
+
+@dataclass
+class UpdateResult:
+    """What one learner update returns."""
+
+    metrics: dict[str, float]  # scalar losses etc.; names become `wmdist_learner_<name>`
+    priorities: np.ndarray | None = None  # [B] new priorities, or None to leave them
+    extras: dict[str, float] = field(default_factory=dict)
+
+
+class NonFiniteLoss(RuntimeError):
+    """Raised by an update whose loss is NaN/inf, before any parameter changed."""
+
+
+class Policy(ABC):
+    """Acts for E environments at once (in a collector or the evaluator).
+
+    Stateful: recurrent policies keep their per-env state and reset it where `first`.
+    """
+
+    @abstractmethod
+    def set_weights(self, weights: Weights, version: int) -> None:
+        """Load a weight snapshot published by the learner."""
+
+    @abstractmethod
+    def act(
+        self,
+        obs: np.ndarray,  # [E, *obs_shape]
+        first: np.ndarray,  # [E] bool: o_t starts an episode (reset recurrent state)
+        legal: np.ndarray | None,  # [E, A] bool legal-action mask (discrete envs), or None
+        to_play: np.ndarray | None,  # [E] int player to move (two-player games), or None
+        explore: bool,  # True in collectors, False for greedy evaluation
+    ) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+        """Return actions [E, ...] and per-step extras (each [E, ...]) to store."""
+
+    def set_progress(self, env_steps: int, updates: int) -> None:
+        """Told the run's progress (for temperature or exploration schedules)."""
+
+
+class Learner(ABC):
+    """Owns the trainable parameters and optimizers (in the learner actor)."""
+
+    @abstractmethod
+    def update(self, batch: Batch) -> UpdateResult:
+        """One gradient step; raise NonFiniteLoss (without stepping) if the loss is not finite."""
+
+    @abstractmethod
+    def get_weights(self) -> Weights:
+        """The parameters collectors and reanalyzers need, as numpy arrays."""
+
+    @abstractmethod
+    def state_dict(self) -> dict[str, Any]:
+        """Everything to resume exactly: parameters, optimizer state, counters."""
+
+    @abstractmethod
+    def load_state_dict(self, state: Mapping[str, Any]) -> None:
+        """Restore what `state_dict` returned."""
+
+
+class Reanalyzer(ABC):
+    """Refreshes stored targets with newer weights (MuZero Reanalyze, EfficientZero)."""
+
+    @abstractmethod
+    def set_weights(self, weights: Weights, version: int) -> None:
+        """Load a weight snapshot published by the learner."""
+
+    @abstractmethod
+    def reanalyze(self, batch: Batch) -> dict[str, np.ndarray]:
+        """Return fresh per-step fields ([B, T, ...]) to write back over the stored ones."""
+
+
+class Algorithm(ABC):
+    """Factory for an algorithm's parts; built in every process from (spec, config).
+
+    Subclasses set `name` and `Config` (a dataclass of hyperparameters declared with
+    `wmdist.config.fields.param`; it is the `algo` section of the run config).
+    """
+
+    name: ClassVar[str]
+    Config: ClassVar[type]
+
+    def __init__(self, spec: EnvSpec, config: Any, seed: int = 0) -> None:
+        self.spec = spec
+        self.config = config
+        self.seed = seed
+
+    def validate(self) -> None:
+        """Raise ValueError (one line) if this algorithm can't run on `self.spec`."""
+
+    @abstractmethod
+    def extra_fields(self) -> dict[str, FieldSpec]:
+        """Per-step fields beyond obs/action/reward/first/last/terminal that replay stores
+        (the extras `Policy.act` returns)."""
+
+    @abstractmethod
+    def make_policy(self, device: str = "cpu") -> Policy:
+        ...
+
+    @abstractmethod
+    def make_learner(self, device: str = "cpu") -> Learner:
+        ...
+
+    def make_reanalyzer(self, device: str = "cpu") -> Reanalyzer | None:
+        """None if the algorithm has no reanalyze step."""
+        return None
+
+    def step_fields(self) -> dict[str, FieldSpec]:
+        """Every per-step field of a stored sequence."""
+        s = self.spec
+        fields = {
+            "obs": FieldSpec(tuple(s.obs_shape), s.obs_dtype),
+            "action": FieldSpec(tuple(s.action_shape), s.action_dtype.name),
+            "reward": FieldSpec((), "float32"),
+            "first": FieldSpec((), "bool"),
+            "last": FieldSpec((), "bool"),
+            "terminal": FieldSpec((), "bool"),
+        }
+        fields.update(self.extra_fields())
+        return fields
