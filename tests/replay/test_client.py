@@ -1,0 +1,163 @@
+"""The Ray service end to end (real Ray, real redis-server): shards sampled as one buffer, the
+shared limiter, close, checkpoints, private redis-server, and SIGKILL of a shard process."""
+from __future__ import annotations
+
+import os
+import pickle
+import signal
+import stat
+import threading
+import time
+
+import numpy as np
+import pytest
+import ray
+import redis
+from replay_helpers import FIELDS, T, make_batch
+from scipy.stats import chisquare
+
+from wmdist.replay.config import ReplayConfig
+from wmdist.runtime.replay_client import ReplayClient, create_replay
+
+
+def _cfg(**kw) -> ReplayConfig:
+    base = dict(shards=2, capacity_steps=64 * T, seq_len=T, min_size=0, shard_cpus=0.1, error_buffer=1000)
+    return ReplayConfig(**{**base, **kw})
+
+
+def _ids(sample) -> np.ndarray:
+    return sample.data["obs"][:, 0, 0].astype(int)
+
+
+@pytest.fixture
+def started(ray_session, tmp_path):
+    clients: list[ReplayClient] = []
+
+    def start(cfg: ReplayConfig, name: str = "t") -> ReplayClient:
+        c = create_replay(cfg, FIELDS, str(tmp_path), name)
+        clients.append(c)
+        return c
+
+    yield start
+    for c in clients:
+        c.close()
+
+
+@pytest.mark.parametrize("backend", ["memory", "redis"])
+def test_two_shards_sample_as_one_buffer(started, backend):
+    c = started(_cfg(backend=backend, sampler="prioritized", priority_alpha=1.0, priority_beta=0.5))
+    for src in range(4):  # 4 collectors x 5 episodes, routed by hash(collector, episode)
+        b = make_batch(5, start=5 * src)
+        assert c.insert(b, source_id=src)
+    st = c.stats()
+    assert st["size_sequences"] == 20 and min(st["shard0_size_sequences"], st["shard1_size_sequences"]) > 0
+    # uniform at first (all at max priority): every sequence equally likely across both shards
+    ids = np.concatenate([_ids(c.sample(500)) for _ in range(8)])
+    assert chisquare(np.bincount(ids, minlength=20)).pvalue > 1e-3
+    # priorities p_i = i + 1 written back by key: frequencies and IS weights follow the union
+    s = c.sample(100)
+    seen = {}
+    for k, st_, i in zip(s.keys, s.stamps, _ids(s)):
+        seen[i] = (k, st_)
+    assert len(seen) == 20
+    keys = np.array([seen[i][0] for i in range(20)])
+    stamps = np.array([seen[i][1] for i in range(20)])
+    assert c.update_priorities(keys, stamps, np.arange(1, 21, dtype=float)) == 20
+    samples = [c.sample(500) for _ in range(8)]
+    ids = np.concatenate([_ids(x) for x in samples])
+    P = np.arange(1, 21) / np.arange(1, 21).sum()
+    assert chisquare(np.bincount(ids, minlength=20), P * ids.size).pvalue > 1e-3
+    x = samples[0]
+    w = (20 * P[_ids(x)]) ** -0.5
+    assert np.allclose(x.is_weight, w / w.max(), rtol=1e-5)
+
+
+def test_limiter_held_across_shards(started):
+    c = started(_cfg(samples_per_insert=2.0, error_buffer=4, min_size=3 * T))
+    assert c.sample(2, timeout=0.2) is None  # below min_size
+    assert c.insert(make_batch(3), source_id=0)
+    got = c.sample(2, timeout=5)
+    assert got is not None and got.data["obs"].shape == (2, T, 3) and got.mask.dtype == np.float32
+    for _ in range(2):  # samples run ahead of the ratio: the next one waits
+        assert c.sample(2, timeout=5) is not None
+    assert c.sample(2, timeout=0.3) is None
+    assert c.insert(make_batch(3, start=10), source_id=1)
+    assert c.sample(2, timeout=5) is not None
+    # inserts that run ahead wait too (both shards count against one limiter)
+    oks = [c.insert(make_batch(1, start=20 + i), source_id=i, timeout=0.2) for i in range(12)]
+    assert oks.count(False) > 0 and oks[0]
+    st = c.stats()
+    assert st["sample_wait_seconds"] >= 0.4 and st["insert_wait_seconds"] > 0.1
+
+
+def test_close_unblocks_waiters_and_checkpoint_round_trip(started, tmp_path):
+    c = started(_cfg(shards=1, min_size=10**6, sampler="prioritized"))
+    out = []
+    th = threading.Thread(target=lambda: out.append(c.sample(4, timeout=None)))
+    th.start()
+    assert c.insert(make_batch(6), source_id=3)
+    pickled = pickle.loads(pickle.dumps(c))  # what collectors receive
+    assert pickled.insert(make_batch(2, start=6), source_id=4)
+    c.save(str(tmp_path / "ckpt"))
+    time.sleep(0.2)
+    assert th.is_alive()
+    c2 = started(_cfg(shards=1, min_size=10**6, sampler="prioritized"), name="t2")
+    c2.restore(str(tmp_path / "ckpt"))
+    a, b = c.stats(), c2.stats()
+    for k in ("size_sequences", "size_steps", "inserts", "shard0_size_sequences", "limiter_size_steps"):
+        assert a[k] == b[k], k
+    c.close()
+    th.join(10)
+    assert not th.is_alive() and out == [None]
+    assert c.sample(1, timeout=0.1) is None and not c.insert(make_batch(1), 0)
+
+
+def test_policy_lag_and_bad_input(started):
+    c = started(_cfg(shards=1, max_policy_lag=2))
+    c.set_policy_version(5)
+    b = make_batch(5)  # versions 0..4: only 3 and 4 are within 2 of version 5
+    assert c.insert(b, source_id=0)
+    st = c.stats()
+    assert st["drops_policy_lag"] == 3 and st["size_sequences"] == 2
+    bad = make_batch(2)
+    bad.data["obs"] = bad.data["obs"][..., :2]
+    with pytest.raises(ValueError, match="'obs': shape"):
+        c.insert(bad, source_id=0)
+
+
+def test_private_redis_and_shard_sigkill(started, tmp_path):
+    c = started(_cfg(backend="redis", redis_appendfsync="always", sampler="prioritized"), name="dur")
+    server = c._server
+    pw = os.path.join(server.dir, "redis.pass")
+    assert stat.S_IMODE(os.stat(pw).st_mode) == 0o600
+    assert stat.S_IMODE(os.stat(server.conf).st_mode) == 0o600
+    with pytest.raises(redis.AuthenticationError):
+        redis.Redis(port=server.port).ping()  # a password is required
+    assert server.client().config_get("bind")["bind"] == "127.0.0.1"
+    for src in range(3):
+        assert c.insert(make_batch(4, start=4 * src), source_id=src)
+    s = c.sample(12)
+    c.update_priorities(s.keys, s.stamps, np.full(12, 2.5))
+    before = c.stats()
+    # SIGKILL redis-server, restart it from its AOF, then SIGKILL a shard process
+    server.kill()
+    server.start()
+    pid = ray.get(c.shards[0].pid.remote())
+    os.kill(pid, signal.SIGKILL)
+    deadline = time.monotonic() + 60
+    while True:  # Ray restarts the actor; its __init__ rebuilds the index from redis
+        try:
+            if ray.get(c.shards[0].pid.remote(), timeout=10) != pid:
+                break
+        except Exception:
+            pass
+        assert time.monotonic() < deadline, "shard did not come back"
+        time.sleep(0.2)
+    after = c.stats()
+    for k in ("size_sequences", "size_steps", "shard0_size_sequences", "shard1_size_sequences"):
+        assert after[k] == before[k], k
+    ids = np.concatenate([_ids(c.sample(64)) for _ in range(3)])
+    assert set(ids) == set(range(12))  # every acknowledged sequence is served again
+    d = server.dir
+    c.close()
+    assert server.proc is None and not any(f.endswith(".pid") for f in os.listdir(d))

@@ -1,0 +1,196 @@
+"""The actor-learner runtime on a real 2-CPU local Ray instance, with the fake algorithm."""
+from __future__ import annotations
+
+import threading
+import time
+import urllib.request
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from wmdist.config.errors import ConfigError
+from wmdist.config.loader import dump_yaml, load_config
+from wmdist.runtime import checkpoint as ck
+from wmdist.runtime.driver import Counters, Driver
+from wmdist.runtime.roles import build_algorithm
+from wmdist.runtime.topology import build
+from wmdist.runtime.train import env_spec_or_error
+
+CFG = str(Path(__file__).parent / "fake.yaml")
+
+
+def _topology(tmp_path, *overrides):
+    cfg = load_config(CFG, [f"run.dir={tmp_path}", *overrides])
+    spec = env_spec_or_error(cfg)
+    fields = build_algorithm(cfg, spec, 0).step_fields()
+    run_dir = tmp_path / "run"
+    run_dir.mkdir(exist_ok=True)
+    (run_dir / "config.yaml").write_text(dump_yaml(cfg))
+    return build(cfg, spec, run_dir, fields)
+
+
+def _complete_sequences_only(sample) -> None:
+    """Every sampled window is a prefix of real steps; a short one ends its episode."""
+    mask = sample.mask.astype(bool)  # [B, T]
+    for row, m in enumerate(mask):
+        n = int(m.sum())
+        assert n > 0 and m[:n].all() and not m[n:].any()
+        if n < mask.shape[1]:
+            assert sample.data["last"][row, n - 1]
+
+
+def test_full_topology_versions_reach_collectors_and_actions_follow_weights(ray_session, tmp_path):
+    ray = ray_session
+    topo = _topology(tmp_path, "reanalyze.num=1", "eval.every_seconds=1", "run.max_updates=80")
+    try:
+        result = Driver(topo, Counters()).run()
+        assert result.status == "done", result.message
+        c = result.counters
+        assert c.updates >= 80 and c.version >= 80 // 5
+        assert c.env_steps > 0 and c.episodes > 0 and c.reanalyzed > 0 and c.eval_episodes > 0
+        # every collector pulls the newest version at its next segment boundary
+        for col in topo.collectors:
+            ray.get(col.run_segment.remote())
+            assert ray.get(col.current_version.remote()) == c.version
+        # actions follow the published weights: all-right, then all-left
+        obs = np.abs(np.random.default_rng(0).normal(size=(16, 4))).astype(np.float32) + 0.1  # [16, 4] > 0
+        for version, favoured in ((10_000, 1), (10_001, 0)):
+            w = np.zeros((4, 2), np.float32)
+            w[:, favoured] = 1.0  # positive observations: the favoured column's logit wins
+            ref = ray.put({"w": w})
+            ray.get(topo.broker.publish.remote(version, [ref]))
+            for col in topo.collectors:
+                ray.get(col.run_segment.remote())
+                assert ray.get(col.current_version.remote()) == version
+                acts = ray.get(col.probe_actions.remote(obs))
+                assert (acts == favoured).all()
+    finally:
+        topo.shutdown()
+
+
+def test_killed_collector_restarts_with_current_weights(ray_session, tmp_path):
+    ray = ray_session
+    topo = _topology(tmp_path, "run.max_minutes=0.3")
+    victim = topo.collectors[0]
+    killed_at: dict = {}
+
+    def kill() -> None:
+        killed_at["version"] = ray.get(topo.broker.current_version.remote())
+        ray.kill(victim, no_restart=False)
+
+    timer = threading.Timer(5.0, kill)
+    timer.start()
+    try:
+        result = Driver(topo, Counters()).run()
+        timer.join()
+        assert result.status == "done", result.message
+        assert result.counters.restarts["collector"] >= 1
+        assert result.counters.updates > 0
+        # back with weights at least as new as when it died, and stepping again
+        assert ray.get(victim.current_version.remote(), timeout=60) >= killed_at["version"]
+        stats = ray.get(victim.run_segment.remote())
+        assert stats["env_steps"] > 0 or stats["limiter_blocked"]
+        sample = topo.replay.sample(64, timeout=5)
+        assert sample is not None
+        _complete_sequences_only(sample)
+    finally:
+        topo.shutdown()
+
+
+def test_resume_restores_counters_weights_optimizer_and_replay(ray_session, tmp_path):
+    ray = ray_session
+    topo = _topology(tmp_path, "run.max_updates=40", "checkpoint.every_seconds=0")
+    try:
+        first = Driver(topo, Counters()).run()
+        assert first.status == "done"
+        state = ray.get(topo.learner.state.remote())
+    finally:
+        topo.shutdown()
+    ckpt = ck.latest_checkpoint(tmp_path / "run")
+    assert ckpt is not None
+    saved = ck.load_counters(ckpt)
+    assert saved["updates"] == first.counters.updates and saved["env_steps"] == first.counters.env_steps
+
+    topo2 = _topology(tmp_path, "run.max_updates=40")
+    try:
+        ray.get(topo2.learner.load.remote(ck.load_learner_state(ckpt)))
+        topo2.replay.restore(str(ckpt / "replay"))
+        state2 = ray.get(topo2.learner.state.remote())
+        assert state2["updates"] == state["updates"] and state2["version"] == state["version"]
+        np.testing.assert_array_equal(state2["learner"]["w"].numpy(), state["learner"]["w"].numpy())
+        m1 = state["learner"]["opt"]["optimizer"]["state"][0]["momentum_buffer"]
+        m2 = state2["learner"]["opt"]["optimizer"]["state"][0]["momentum_buffer"]
+        np.testing.assert_array_equal(m1.numpy(), m2.numpy())
+        # replay holds exactly what was saved: saving it again gives identical stats and bytes
+        resaved = tmp_path / "resaved"
+        topo2.replay.save(str(resaved))
+        for f in sorted(p for p in (ckpt / "replay").rglob("*") if p.is_file() and "limiter" not in p.name):
+            assert (resaved / f.relative_to(ckpt / "replay")).read_bytes() == f.read_bytes(), f.name
+        # the resumed version is what collectors now see
+        assert ray.get(topo2.broker.current_version.remote()) == state["version"]
+    finally:
+        topo2.shutdown()
+
+
+def test_train_ratio_held_within_ten_percent(ray_session, tmp_path):
+    topo = _topology(tmp_path, "replay.samples_per_insert=2", "replay.error_buffer=8", "replay.min_size=32",
+                     "run.max_minutes=0.2", "actors.num=1")
+    try:
+        Driver(topo, Counters()).run()
+        st = topo.replay.stats()
+        inserted, sampled = st["inserts"], st["samples"]
+        assert inserted > 50
+        assert abs(sampled / inserted - 2.0) <= 0.2, (sampled, inserted)
+    finally:
+        topo.shutdown()
+
+
+def test_metrics_endpoint_serves_every_metric(ray_session, tmp_path):
+    from wmdist.metrics import METRICS
+    from wmdist.runtime.telemetry import Telemetry
+
+    topo = _topology(tmp_path, "run.max_updates=20", "metrics.enabled=true", "eval.every_seconds=1",
+                     "reanalyze.num=1")
+    tele = Telemetry(topo.cfg, topo.run_dir, open("/dev/null", "w"))
+    try:
+        driver = Driver(topo, Counters(), on_tick=tele.update)
+        driver.run()
+        driver.tick()
+        body = urllib.request.urlopen(f"http://127.0.0.1:{tele.hub.port}/metrics", timeout=10).read().decode()
+        missing = [name for name in METRICS if name not in body]
+        assert not missing, missing
+    finally:
+        tele.close()
+        topo.shutdown()
+
+
+def test_more_collectors_gather_more_steps_with_a_slow_env(ray_session, tmp_path):
+    rates = {}
+    for n in (1, 3):
+        topo = _topology(tmp_path, "env.id=gym:tests.runtime.slow_env:SlowCartPole-v0", f"actors.num={n}",
+                         "actors.cpus=0.3", "run.max_minutes=0.12", "learner.cpus=0.2")
+        try:
+            ray_session.get([c.ping.remote() for c in topo.collectors])  # time steady state, not process start
+            t0 = time.monotonic()
+            res = Driver(topo, Counters()).run()
+            rates[n] = res.counters.env_steps / (time.monotonic() - t0)
+        finally:
+            topo.shutdown()
+    assert rates[3] > 1.8 * rates[1], rates
+
+
+def test_config_needing_more_cpus_than_the_cluster_fails_before_any_actor(ray_session, tmp_path):
+    with pytest.raises(ConfigError) as err:
+        _topology(tmp_path, "actors.num=40", "actors.cpus=0.5")
+    msg = str(err.value)
+    assert "needs" in msg and "CPU" in msg and "\n" not in msg
+    from ray.util.state import list_actors
+
+    alive = [a for a in list_actors(filters=[("state", "=", "ALIVE")]) if "Collector" in a.class_name]
+    assert not alive
+
+
+def test_unknown_algorithm_fails_before_ray(tmp_path):
+    with pytest.raises(ConfigError, match="unknown algorithm 'dreamr'"):
+        load_config(CFG, ["algo.name=dreamr"])

@@ -1,0 +1,38 @@
+"""Dreamer V1/V2/V3 as one `Algorithm` (the version is configuration)."""
+from __future__ import annotations
+
+from wmdist.algos.base import Algorithm, FieldSpec
+from wmdist.algos.dreamer.config import DreamerConfig
+from wmdist.algos.dreamer.learner import DreamerLearner
+from wmdist.algos.dreamer.policy import DreamerPolicy
+from wmdist.envs.spec import EnvSpec
+
+
+class Dreamer(Algorithm):
+    name = "dreamer"
+    Config = DreamerConfig
+
+    def __init__(self, spec: EnvSpec, config: DreamerConfig | None = None, seed: int = 0) -> None:
+        super().__init__(spec, config if config is not None else DreamerConfig(), seed)
+        self.cfg = self.config.resolved()  # None fields filled from the version's defaults
+        self.validate()
+
+    def validate(self) -> None:
+        s = self.spec
+        if s.players != 1:
+            raise ValueError(f"Dreamer supports single-player envs only, {s.id} has {s.players} players")
+        if s.obs_kind == "image" and tuple(s.obs_shape[:2]) != (64, 64):
+            raise ValueError(f"Dreamer needs 64x64 image observations, {s.id} gives {s.obs_shape}")
+        if s.obs_kind == "vector" and len(s.obs_shape) != 1:
+            raise ValueError(f"Dreamer needs flat vector observations, {s.id} gives {s.obs_shape}")
+        if s.obs_kind not in ("vector", "image"):
+            raise ValueError(f"unknown obs_kind {s.obs_kind!r} for {s.id}")
+
+    def extra_fields(self) -> dict[str, FieldSpec]:
+        return {}  # the RSSM state is recomputed from the sequence; nothing extra is stored
+
+    def make_policy(self, device: str = "cpu") -> DreamerPolicy:
+        return DreamerPolicy(self.cfg, self.spec, device, self.seed)
+
+    def make_learner(self, device: str = "cpu") -> DreamerLearner:
+        return DreamerLearner(self.cfg, self.spec, device, self.seed)

@@ -1,0 +1,181 @@
+"""Imagined rollouts from posterior states and the actor-critic losses on them.
+
+`backprop` (V1; V2/V3 continuous) keeps gradients through the learned dynamics to the
+actor; the world model's weights are frozen meanwhile so no weight gradients are computed
+for them. REINFORCE (V2/V3 discrete) runs the dynamics without autograd at all: only the
+actor's forward is recorded.
+"""
+from __future__ import annotations
+
+import contextlib
+from dataclasses import dataclass
+
+import torch
+import torch.nn.functional as F
+
+from wmdist.algos.dreamer.config import DreamerConfig
+from wmdist.algos.dreamer.kl import masked_mean
+from wmdist.algos.dreamer.layers import Latent
+from wmdist.algos.dreamer.nets import ActorCritic, WorldModel
+from wmdist.algos.dreamer.returns import PercentileNormalizer, lambda_returns
+from wmdist.nets.dists import twohot_loss, twohot_mean
+
+
+@dataclass
+class Start:
+    """Posterior states to imagine from (detached), flattened over [B*T] and filtered by mask."""
+
+    deter: torch.Tensor  # [N, D]
+    latent: Latent  # [N]
+    cont: torch.Tensor  # [N] 1 - terminal of the start state
+
+
+@dataclass
+class Trajectory:
+    deter: torch.Tensor  # [H + 1, N, D]
+    latent: Latent  # [(H + 1) * N]
+    logp: torch.Tensor  # [H, N] log pi(a_t | s_t)
+    entropy: torch.Tensor  # [H, N]
+
+
+def _freeze(module: torch.nn.Module):
+    @contextlib.contextmanager
+    def ctx():
+        flags = [p.requires_grad for p in module.parameters()]
+        module.requires_grad_(False)
+        try:
+            yield
+        finally:
+            for p, f in zip(module.parameters(), flags):
+                p.requires_grad_(f)
+    return ctx()
+
+
+def imagine(
+    wm: WorldModel, ac: ActorCritic, start: Start, horizon: int, backprop: bool, generator: torch.Generator | None
+) -> Trajectory:
+    """Roll the prior forward H steps under the actor from every start state."""
+    rssm, spec = wm.rssm, wm.spec
+    h, z = start.deter, start.latent
+    hs, zs, logps, ents = [h], [z], [], []
+    dyn_ctx = contextlib.nullcontext if backprop else torch.no_grad
+    for _ in range(horizon):
+        dist = ac.policy(h, z)
+        a = dist.sample(generator)  # [N] indices or [N, A]
+        logps.append(dist.log_prob(a.detach()))
+        ents.append(dist.entropy())
+        if spec.discrete:
+            onehot = F.one_hot(a, spec.num_actions).float()
+            a_in = onehot + dist.logp.exp() - dist.logp.exp().detach() if backprop else onehot
+        else:
+            a_in = a if backprop else a.detach()
+        with dyn_ctx():
+            h = rssm.img_step(h, z, a_in)
+            z = rssm.sample(rssm.prior(h), generator, grad=backprop)
+        hs.append(h)
+        zs.append(z)
+    if rssm.classes:
+        probs = torch.stack([z.probs for z in zs[1:]]) if backprop else None
+        if probs is not None:  # the start states carry no gradient
+            probs = torch.cat([torch.zeros_like(probs[:1]).expand(1, *probs.shape[1:]), probs])
+        latent = Latent(index=torch.stack([z.index for z in zs]).flatten(0, 1),
+                        probs=None if probs is None else probs.flatten(0, 1), classes=rssm.classes)
+    else:
+        latent = Latent(sample=torch.stack([z.sample for z in zs]).flatten(0, 1))
+    return Trajectory(torch.stack(hs), latent, torch.stack(logps), torch.stack(ents))
+
+
+class ActorCriticLoss:
+    """Computes the actor and critic losses of one update (V1/V2/V3 per config)."""
+
+    def __init__(self, cfg: DreamerConfig, wm: WorldModel, ac: ActorCritic, bins: torch.Tensor) -> None:
+        self.cfg, self.wm, self.ac, self.bins = cfg, wm, ac, bins
+        self.norm = PercentileNormalizer(cfg.return_decay, cfg.return_low, cfg.return_high)
+        discrete = wm.spec.discrete
+        self.backprop = (cfg.actor_grad_disc if discrete else cfg.actor_grad_cont) == "backprop"
+
+    def _value(self, logits: torch.Tensor) -> torch.Tensor:
+        if self.cfg.critic_head == "twohot":
+            return twohot_mean(logits, self.bins)
+        return logits.float().squeeze(-1)
+
+    def __call__(self, start: Start, generator: torch.Generator | None) -> tuple[torch.Tensor, torch.Tensor, dict[str, float]]:
+        cfg, wm, ac = self.cfg, self.wm, self.ac
+        H, n = cfg.horizon, start.deter.shape[0]
+        with _freeze(wm) if self.backprop else contextlib.nullcontext():
+            traj = imagine(wm, ac, start, H, self.backprop, generator)
+            h_all = traj.deter.flatten(0, 1)  # [(H+1)*N, D]
+            z_all = traj.latent
+            grad_ctx = contextlib.nullcontext if self.backprop else torch.no_grad
+            with grad_ctx():
+                # reward and continue of states 1..H (one shared first-layer matmul)
+                tail = slice(n, None)
+                heads = wm.heads({"h": h_all[tail], "z": _rows(z_all, tail)}, upto=wm.last_head)
+                if cfg.reward_head == "twohot":
+                    reward = twohot_mean(heads["reward"], self.bins)
+                else:
+                    reward = heads["reward"].float().squeeze(-1)
+                reward = reward.reshape(H, n)
+                if cfg.cont_head:
+                    cont = torch.sigmoid(heads["cont"].float().squeeze(-1)).reshape(H, n)
+                else:
+                    cont = torch.ones(H, n, device=reward.device)
+            # critic on every imagined state from detached features (trains the critic only)
+            feats_sg = {"h": h_all.detach(), "z": z_all.detach()}
+            critic_logits = ac.critic(feats_sg)["critic"]  # [(H+1)*N, K]
+            value = self._value(critic_logits).reshape(H + 1, n)
+            if cfg.slow_critic == "target":
+                with torch.no_grad():
+                    value_ret = self._value(ac.slow_critic(feats_sg)["critic"]).reshape(H + 1, n)
+            elif self.backprop:  # returns must carry the gradient back through the states
+                value_ret = self._value(ac.critic({"h": h_all, "z": z_all})["critic"]).reshape(H + 1, n)
+            else:
+                value_ret = value.detach()
+            disc = cfg.discount * cont  # [H, N]
+            returns = lambda_returns(reward, disc, value_ret, cfg.lam)  # [H, N]
+            # weight of step t: start cont times prod_{i<=t} gamma c_i (no credit after a predicted end)
+            weight = torch.cat([torch.ones_like(disc[:1]), disc[:-1]]).cumprod(0) * start.cont  # [H, N]
+            weight = weight.detach()
+            if cfg.return_norm == "percentile":
+                self.norm.update(returns)
+                scale = self.norm.scale
+            else:
+                scale = 1.0
+            base = value_ret[:-1].detach()
+            adv = (returns - base) / scale  # DreamerV3 eq. 11: normalised advantage
+            if self.backprop:
+                pg = -adv
+            else:
+                pg = -traj.logp * adv.detach()  # REINFORCE with the critic as baseline
+            actor_loss = masked_mean(pg - cfg.actor_entropy * traj.entropy, weight)
+        # critic: regress lambda-returns (+ V3 slow-critic regulariser)
+        target = returns.detach()
+        logits_h = critic_logits.reshape(H + 1, n, -1)[:-1]
+        if cfg.critic_head == "twohot":
+            closs = twohot_loss(logits_h, target, self.bins)
+        else:
+            closs = 0.5 * (logits_h.float().squeeze(-1) - target).pow(2)
+        if cfg.slow_critic == "reg":
+            with torch.no_grad():
+                slow = self._value(ac.slow_critic({"h": h_all.detach()[: H * n], "z": _rows(z_all.detach(), slice(0, H * n))})["critic"]).reshape(H, n)
+            if cfg.critic_head == "twohot":
+                closs = closs + cfg.slow_reg_scale * twohot_loss(logits_h, slow, self.bins)
+            else:
+                closs = closs + cfg.slow_reg_scale * 0.5 * (logits_h.float().squeeze(-1) - slow).pow(2)
+        critic_loss = masked_mean(closs, weight)
+        metrics = {
+            "actor_loss": float(actor_loss.detach()),
+            "critic_loss": float(critic_loss.detach()),
+            "actor_entropy": float(traj.entropy.detach().mean()),
+            "imag_return": float(returns.detach().mean()),
+            "imag_reward": float(reward.detach().mean()),
+            "value": float(value.detach().mean()),
+            "return_scale": float(scale),
+        }
+        return actor_loss, critic_loss, metrics
+
+
+def _rows(lat: Latent, rows: slice) -> Latent:
+    """The states `rows` of a flat latent batch."""
+    cut = lambda x: None if x is None else x[rows]  # noqa: E731
+    return Latent(cut(lat.index), cut(lat.probs), cut(lat.sample), lat.classes)

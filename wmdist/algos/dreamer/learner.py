@@ -1,0 +1,148 @@
+"""Dreamer's learner: world-model update on [B, T] sequences, then actor-critic in imagination."""
+from __future__ import annotations
+
+import contextlib
+from typing import Any, Mapping
+
+import numpy as np
+import torch
+
+from wmdist.algos.base import Batch, Learner, NonFiniteLoss, UpdateResult, Weights
+from wmdist.algos.dreamer.config import DreamerConfig
+from wmdist.algos.dreamer.imagine import ActorCriticLoss, Start
+from wmdist.algos.dreamer.kl import kl_loss, masked_mean
+from wmdist.algos.dreamer.layers import Latent
+from wmdist.algos.dreamer.nets import ActorCritic, WorldModel, action_to_model
+from wmdist.envs.spec import EnvSpec
+from wmdist.nets.dists import bernoulli_nll, twohot_bins, twohot_loss
+from wmdist.nets.optim import GuardedStep, OptimConfig
+
+
+def policy_weights(wm: WorldModel, ac: ActorCritic) -> Weights:
+    """World model + actor as numpy (what policies and the dream video need)."""
+    out = {f"wm.{k}": v.detach().cpu().numpy() for k, v in wm.state_dict().items()}
+    out.update({f"actor.{k}": v.detach().cpu().numpy() for k, v in ac.actor.state_dict().items()})
+    return out
+
+
+def load_policy_weights(wm: WorldModel, ac: ActorCritic, weights: Weights) -> None:
+    wm_sd = {k[3:]: torch.as_tensor(np.asarray(v)) for k, v in weights.items() if k.startswith("wm.")}
+    actor_sd = {k[6:]: torch.as_tensor(np.asarray(v)) for k, v in weights.items() if k.startswith("actor.")}
+    if not wm_sd or not actor_sd:
+        raise ValueError("Dreamer weights need 'wm.*' and 'actor.*' entries")
+    wm.load_state_dict(wm_sd)
+    ac.actor.load_state_dict(actor_sd)
+
+
+class DreamerLearner(Learner):
+    def __init__(self, cfg: DreamerConfig, spec: EnvSpec, device: str = "cpu", seed: int = 0) -> None:
+        self.cfg, self.spec, self.device = cfg, spec, torch.device(device)
+        torch.manual_seed(seed)
+        self.wm = WorldModel(cfg, spec).to(self.device)
+        self.ac = ActorCritic(cfg, spec, self.wm.rssm.z_dim).to(self.device)
+        self.bins = twohot_bins(cfg.bins, cfg.bin_low, cfg.bin_high).to(self.device)
+        self.ac_loss = ActorCriticLoss(cfg, self.wm, self.ac, self.bins)
+
+        def opt(lr: float, clip: float) -> OptimConfig:
+            return OptimConfig(kind="adam", lr=lr, eps=cfg.adam_eps, clip_norm=clip)
+
+        self.wm_opt = GuardedStep(self.wm.parameters(), opt(cfg.model_lr, cfg.model_clip))
+        self.actor_opt = GuardedStep(self.ac.actor.parameters(), opt(cfg.actor_lr, cfg.ac_clip))
+        self.critic_opt = GuardedStep(self.ac.critic.parameters(), opt(cfg.critic_lr, cfg.ac_clip))
+        self.generator = torch.Generator(self.device).manual_seed(seed)
+        self.updates = 0
+
+    # --- losses ---------------------------------------------------------------------
+    def _autocast(self):
+        if self.cfg.bf16:
+            return torch.autocast(self.device.type, dtype=torch.bfloat16)
+        return contextlib.nullcontext()
+
+    def _tensors(self, batch: Batch) -> dict[str, torch.Tensor]:
+        for key in ("obs", "action", "reward", "first", "terminal", "mask"):
+            if key not in batch:
+                raise ValueError(f"Dreamer batch lacks field {key!r}")
+        out = {k: torch.as_tensor(np.asarray(v), device=self.device) for k, v in batch.items()}
+        b = out["mask"].shape[0]
+        out["is_weight"] = out["is_weight"].float() if "is_weight" in out else torch.ones(b, device=self.device)
+        return out
+
+    def world_model_loss(self, t: dict[str, torch.Tensor]) -> tuple[torch.Tensor, dict[str, float], Start]:
+        cfg, wm = self.cfg, self.wm
+        b, t_len = t["mask"].shape
+        weight = t["mask"].float() * t["is_weight"][:, None]  # [B, T]
+        embed = wm.encode(t["obs"])  # [B, T, E]
+        obs_out = wm.rssm.observe(embed, action_to_model(t["action"], self.spec), t["first"].bool(), self.generator)
+        h = obs_out.deter.flatten(0, 1)  # [B*T, D]
+        z = obs_out.latent
+        heads = wm.heads({"h": h, "z": z})
+        target = wm.obs_target(t["obs"]).flatten(0, 1)
+        pred = wm.decode(h, z, heads).float()
+        recon = (pred - target).pow(2).flatten(1).sum(-1).reshape(b, t_len)  # Gaussian NLL up to a constant
+        reward = t["reward"].float()
+        if cfg.reward_head == "twohot":
+            rew_l = twohot_loss(heads["reward"], reward.flatten(), self.bins).reshape(b, t_len)
+        else:
+            rew_l = 0.5 * (heads["reward"].float().squeeze(-1).reshape(b, t_len) - reward).pow(2)
+        cont_target = 1.0 - t["terminal"].float()
+        loss = cfg.recon_scale * masked_mean(recon, weight) + cfg.reward_scale * masked_mean(rew_l, weight)
+        metrics: dict[str, float] = {}
+        if cfg.cont_head:
+            cont_l = bernoulli_nll(heads["cont"].squeeze(-1).reshape(b, t_len), cont_target)
+            loss = loss + cfg.cont_scale * masked_mean(cont_l, weight)
+            metrics["cont_loss"] = float(masked_mean(cont_l.detach(), weight))
+        kl, dyn, rep = kl_loss(wm.rssm.kl, obs_out.post, obs_out.prior, weight, cfg.kl_dyn, cfg.kl_rep, cfg.free_nats, cfg.free_avg)
+        loss = loss + kl
+        metrics.update(
+            model_loss=float(loss.detach()), recon_loss=float(masked_mean(recon.detach(), weight)),
+            reward_loss=float(masked_mean(rew_l.detach(), weight)), kl_dyn=float(dyn), kl_rep=float(rep),
+        )
+        valid = t["mask"].flatten() > 0  # imagine only from real steps
+        start = Start(h.detach()[valid], _select(z.detach(), valid), cont_target.flatten()[valid])
+        return loss, metrics, start
+
+    # --- Learner API ----------------------------------------------------------------
+    def update(self, batch: Batch) -> UpdateResult:
+        t = self._tensors(batch)
+        with self._autocast():
+            model_loss, metrics, start = self.world_model_loss(t)
+            actor_loss, critic_loss, ac_metrics = self.ac_loss(start, self.generator)
+        for name, loss in (("model", model_loss), ("actor", actor_loss), ("critic", critic_loss)):
+            if not torch.isfinite(loss.detach()).all():
+                raise NonFiniteLoss(f"dreamer {name} loss is {float(loss.detach())}")
+        # actor first: its graph reads the critic's and world model's current weights
+        metrics["actor_grad_norm"] = self.actor_opt(actor_loss)
+        metrics["critic_grad_norm"] = self.critic_opt(critic_loss)
+        metrics["model_grad_norm"] = self.wm_opt(model_loss)
+        self.updates += 1
+        if self.cfg.slow_critic != "none" and self.updates % self.cfg.slow_critic_every == 0:
+            self.ac.update_slow(self.cfg.slow_critic_mix)
+        metrics.update(ac_metrics)
+        return UpdateResult(metrics=metrics)
+
+    def get_weights(self) -> Weights:
+        return policy_weights(self.wm, self.ac)
+
+    def state_dict(self) -> dict[str, Any]:
+        return {
+            "wm": self.wm.state_dict(), "ac": self.ac.state_dict(),
+            "wm_opt": self.wm_opt.state_dict(), "actor_opt": self.actor_opt.state_dict(),
+            "critic_opt": self.critic_opt.state_dict(), "return_norm": self.ac_loss.norm.state_dict(),
+            "generator": self.generator.get_state(), "updates": self.updates,
+        }
+
+    def load_state_dict(self, state: Mapping[str, Any]) -> None:
+        self.wm.load_state_dict(state["wm"])
+        self.ac.load_state_dict(state["ac"])
+        self.wm_opt.load_state_dict(state["wm_opt"])
+        self.actor_opt.load_state_dict(state["actor_opt"])
+        self.critic_opt.load_state_dict(state["critic_opt"])
+        self.ac_loss.norm.load_state_dict(state["return_norm"])
+        self.generator.set_state(torch.as_tensor(state["generator"]))
+        self.updates = int(state["updates"])
+
+
+def _select(lat: Latent, rows: torch.Tensor) -> Latent:
+    """The states where `rows` [N] is True."""
+    pick = lambda x: None if x is None else x[rows]  # noqa: E731
+    return Latent(pick(lat.index), pick(lat.probs), pick(lat.sample), lat.classes)

@@ -1,0 +1,137 @@
+"""The recurrent state-space model shared by Dreamer V1/V2/V3.
+
+State s_t = (h_t, z_t). Transition h_t = GRU(h_{t-1}, img_in([z_{t-1}, a_{t-1}])); prior
+p(z_t | h_t); posterior q(z_t | h_t, e_t) with e_t the observation embedding. The latent is
+Gaussian (V1, `classes = 0`) or `stoch` categoricals of `classes` classes (V2/V3) with an
+optional uniform mix (V3). "Stats" are a tensor: categorical log-probs [..., S, C], or the
+Gaussian's [mean, std] concatenated [..., 2S].
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+from wmdist.algos.dreamer.config import DreamerConfig
+from wmdist.algos.dreamer.layers import GRUCell, Latent, SplitLinear, norm_act
+from wmdist.nets.dists import categorical_kl, gaussian_kl, sample_onehot_index, unimix_logits
+
+
+@dataclass
+class Observed:
+    """What `RSSM.observe` returns for a [B, T] batch."""
+
+    deter: torch.Tensor  # [B, T, D]
+    post: torch.Tensor  # [B, T, stats]
+    prior: torch.Tensor  # [B, T, stats]
+    latent: Latent  # [B*T] posterior samples (straight-through where categorical)
+
+
+class RSSM(nn.Module):
+    def __init__(self, cfg: DreamerConfig, embed_dim: int, action_dim: int) -> None:
+        super().__init__()
+        self.cfg = cfg
+        self.deter, self.stoch, self.classes = cfg.deter, cfg.stoch, cfg.classes
+        self.z_dim = cfg.stoch * cfg.classes if cfg.classes else cfg.stoch
+        stat_dim = self.z_dim if cfg.classes else 2 * cfg.stoch
+        u, act, norm = cfg.units, cfg.act, cfg.norm
+        self.img_in = SplitLinear({"z": self.z_dim, "a": action_dim}, u, bias=not norm)
+        self.img_in_act = norm_act(u, act, norm)
+        self.gru = GRUCell(u, cfg.deter, cfg.gru_norm)
+        self.prior_net = nn.Sequential(nn.Linear(cfg.deter, u, bias=not norm), norm_act(u, act, norm), nn.Linear(u, stat_dim))
+        self.post_in = SplitLinear({"h": cfg.deter, "e": embed_dim}, u, bias=not norm)
+        self.post_out = nn.Sequential(norm_act(u, act, norm), nn.Linear(u, stat_dim))
+
+    # --- distributions -------------------------------------------------------------
+    def stats(self, out: torch.Tensor) -> torch.Tensor:
+        out = out.float()
+        if self.classes:
+            return unimix_logits(out.unflatten(-1, (self.stoch, self.classes)), self.cfg.unimix)
+        mean, std = out.chunk(2, -1)
+        return torch.cat([mean, F.softplus(std) + 0.1], -1)
+
+    def sample(self, stats: torch.Tensor, generator: torch.Generator | None = None, grad: bool = True) -> Latent:
+        """Draw z; `grad` keeps the straight-through / reparameterised path to the stats."""
+        if self.classes:
+            index = sample_onehot_index(stats.detach(), generator)
+            return Latent(index=index, probs=stats.exp() if grad else None, classes=self.classes)
+        mean, std = stats.chunk(2, -1)
+        eps = torch.randn(mean.shape, generator=generator, device=mean.device)
+        z = mean + std * eps
+        return Latent(sample=z if grad else z.detach())
+
+    def mode(self, stats: torch.Tensor) -> Latent:
+        if self.classes:
+            return Latent(index=stats.argmax(-1), classes=self.classes)
+        return Latent(sample=stats.chunk(2, -1)[0])
+
+    def kl(self, p: torch.Tensor, q: torch.Tensor) -> torch.Tensor:
+        """KL(p || q) per state -> [...]."""
+        if self.classes:
+            return categorical_kl(p, q)
+        mp, sp = p.chunk(2, -1)
+        mq, sq = q.chunk(2, -1)
+        return gaussian_kl(mp, sp, mq, sq)
+
+    # --- steps ---------------------------------------------------------------------
+    def initial(self, n: int, device: torch.device | str = "cpu") -> tuple[torch.Tensor, Latent]:
+        h = torch.zeros(n, self.deter, device=device)
+        if self.classes:
+            return h, Latent(index=torch.zeros(n, self.stoch, dtype=torch.long, device=device), classes=self.classes)
+        return h, Latent(sample=torch.zeros(n, self.z_dim, device=device))
+
+    def img_step(self, h: torch.Tensor, z: Latent, a: torch.Tensor, keep: torch.Tensor | None = None) -> torch.Tensor:
+        """h_t from (h_{t-1}, z_{t-1}, a_{t-1}); rows with keep = 0 restart from the zero state."""
+        scale = None
+        if keep is not None:
+            scale = {"z": keep}
+            h = h * keep
+            a = a * keep
+        x = self.img_in_act(self.img_in({"z": z, "a": a}, scale=scale))
+        return self.gru(x, h)
+
+    def prior(self, h: torch.Tensor) -> torch.Tensor:
+        return self.stats(self.prior_net(h))
+
+    def embed_part(self, embed: torch.Tensor) -> torch.Tensor:
+        """The embedding's share of the posterior's first layer (for a whole sequence at once)."""
+        return self.post_in.part("e", embed)
+
+    def post(self, h: torch.Tensor, e_part: torch.Tensor) -> torch.Tensor:
+        return self.stats(self.post_out(self.post_in({"h": h}, pre=e_part)))
+
+    def observe(
+        self,
+        embed: torch.Tensor,  # [B, T, E]
+        action: torch.Tensor,  # [B, T, A] model-space actions; action[t] is taken at o_t
+        first: torch.Tensor,  # [B, T] bool
+        generator: torch.Generator | None = None,
+    ) -> Observed:
+        b, t_len = first.shape
+        e_part = self.embed_part(embed)  # [B, T, U], one matmul for the whole sequence
+        keep = (~first).float().unsqueeze(-1)  # [B, T, 1]
+        keep[:, 0] = 0.0  # a sampled window starts from the zero state
+        h, z = self.initial(b, embed.device)
+        a_prev = torch.zeros_like(action[:, 0])
+        hs, posts, zs = [], [], []
+        for t in range(t_len):
+            h = self.img_step(h, z, a_prev, keep[:, t])
+            post = self.post(h, e_part[:, t])
+            z = self.sample(post, generator)
+            a_prev = action[:, t]
+            hs.append(h)
+            posts.append(post)
+            zs.append(z)
+        deter = torch.stack(hs, 1)
+        prior = self.prior(deter)  # [B, T, stats]: the prior is not needed inside the loop
+        if self.classes:
+            latent = Latent(
+                index=torch.stack([z.index for z in zs], 1).flatten(0, 1),
+                probs=torch.stack([z.probs for z in zs], 1).flatten(0, 1),
+                classes=self.classes,
+            )
+        else:
+            latent = Latent(sample=torch.stack([z.sample for z in zs], 1).flatten(0, 1))
+        return Observed(deter, torch.stack(posts, 1), prior, latent)

@@ -1,0 +1,47 @@
+"""MuZero (Schrittwieser et al., 2020) and MuZero Reanalyze behind the wmdist Algorithm interface."""
+from __future__ import annotations
+
+from wmdist.algos.base import Algorithm, FieldSpec
+from wmdist.algos.muzero.build import build_net, check_spec
+from wmdist.algos.muzero.config import MuZeroConfig
+from wmdist.algos.muzero.learner import MuZeroLearner
+from wmdist.algos.muzero.policy import MuZeroPolicy
+from wmdist.algos.muzero.reanalyzer import MuZeroReanalyzer
+
+
+class MuZero(Algorithm):
+    """Stored extras per step: `search_policy [A]`, `search_value []`; two-player games also
+    store `legal [A] bool` and `to_play [] int8` (the reanalyzer searches with them)."""
+
+    name = "muzero"
+    Config = MuZeroConfig
+
+    def __init__(self, spec, config: MuZeroConfig | None = None, seed: int = 0) -> None:
+        super().__init__(spec, config if config is not None else MuZeroConfig(), seed)
+        self.config.validate()
+
+    def validate(self) -> None:
+        check_spec(self.spec, self.config)
+
+    def extra_fields(self) -> dict[str, FieldSpec]:
+        a = self.spec.num_actions
+        fields = {"search_policy": FieldSpec((a,), "float32"), "search_value": FieldSpec((), "float32")}
+        if self.spec.players == 2:
+            fields["legal"] = FieldSpec((a,), "bool")
+            fields["to_play"] = FieldSpec((), "int8")
+        return fields
+
+    def _net(self):
+        import torch
+
+        torch.manual_seed(self.seed)  # every process builds the same initial weights
+        return build_net(self.spec, self.config)
+
+    def make_policy(self, device: str = "cpu") -> MuZeroPolicy:
+        return MuZeroPolicy(self._net(), self.config, self.spec, self.seed + 1, device)
+
+    def make_learner(self, device: str = "cpu") -> MuZeroLearner:
+        return MuZeroLearner(self._net(), self.config, self.spec.num_actions, self.spec.players, self.seed + 2, device)
+
+    def make_reanalyzer(self, device: str = "cpu") -> MuZeroReanalyzer:
+        return MuZeroReanalyzer(self._net(), self.config, self.spec, self.seed + 3, device)

@@ -1,0 +1,52 @@
+"""MuZero Reanalyze (paper Appendix H): rerun the search with the latest weights over every
+stored step of the sampled sequences and return fresh policy and value targets."""
+from __future__ import annotations
+
+import numpy as np
+import torch
+
+from wmdist.algos.base import Batch, Reanalyzer, Weights
+from wmdist.algos.muzero.build import load_numpy_weights
+from wmdist.algos.muzero.config import MuZeroConfig
+from wmdist.algos.muzero.networks import MuZeroNet
+from wmdist.algos.muzero.searcher import Searcher
+from wmdist.algos.muzero.targets import acting_steps
+from wmdist.envs.spec import EnvSpec
+
+
+class MuZeroReanalyzer(Reanalyzer):
+    def __init__(self, net: MuZeroNet, cfg: MuZeroConfig, spec: EnvSpec, seed: int, device: str = "cpu",
+                 max_roots: int = 1024) -> None:
+        self.cfg, self.spec = cfg, spec
+        self.device = torch.device(device)
+        self.net = net.to(self.device).eval()
+        self.two_player = spec.players == 2
+        self.searcher = Searcher(self.net, cfg.search, cfg.value_support, cfg.reward_support,
+                                 self.two_player, self.device)
+        self.rng = np.random.default_rng(seed)
+        self.max_roots = max_roots  # roots per search call (bounds the tree's memory)
+        self.version = -1
+
+    def set_weights(self, weights: Weights, version: int) -> None:
+        load_numpy_weights(self.net, weights)
+        self.net.eval()
+        self.version = version
+
+    def reanalyze(self, batch: Batch) -> dict[str, np.ndarray]:
+        for k in ("obs", "mask", "last", "search_policy", "search_value"):
+            if k not in batch:
+                raise ValueError(f"muzero reanalyzer: batch lacks field '{k}'")
+        acting = acting_steps(batch["mask"], batch["last"])  # [B, T]
+        policy = np.zeros_like(batch["search_policy"], dtype=np.float32)  # [B, T, A]
+        value = np.zeros_like(batch["search_value"], dtype=np.float32)  # [B, T]
+        r, c = np.nonzero(acting)
+        a = self.spec.num_actions
+        for lo in range(0, len(r), self.max_roots):
+            rr, cc = r[lo:lo + self.max_roots], c[lo:lo + self.max_roots]
+            legal = batch["legal"][rr, cc].astype(bool) if "legal" in batch else np.ones((len(rr), a), bool)
+            to_play = batch["to_play"][rr, cc].astype(np.int64) if self.two_player and "to_play" in batch else None
+            # No root noise: these are training targets, not exploration.
+            res = self.searcher.run(batch["obs"][rr, cc], legal, to_play, self.rng, add_noise=False)
+            policy[rr, cc] = res.policy_target
+            value[rr, cc] = res.root_value
+        return {"search_policy": policy, "search_value": value}

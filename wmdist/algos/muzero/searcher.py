@@ -1,0 +1,66 @@
+"""One batched MCTS over B roots with the MuZero network as the model (used by the policy,
+the reanalyzer and the self-play bench)."""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from wmdist.algos.muzero.networks import MuZeroNet
+from wmdist.nets.support import support_to_scalar
+from wmdist.search.api import SearchConfig, search
+
+
+@dataclass
+class SearchResult:
+    visit_counts: np.ndarray  # [B, A]
+    policy_target: np.ndarray  # [B, A] float32: visit distribution (Gumbel: the improved policy)
+    root_value: np.ndarray  # [B] float32 search value of each root
+    action: np.ndarray  # [B] the search's own choice (used with Gumbel)
+    net_seconds: float  # time spent in network calls
+    total_seconds: float  # time of the whole call
+
+
+class Searcher:
+    """Runs `wmdist.search.search` with `net` as the model; counts network time."""
+
+    def __init__(self, net: MuZeroNet, cfg: SearchConfig, value_support: int, reward_support: int,
+                 two_player: bool, device: torch.device) -> None:
+        self.net, self.cfg = net, cfg
+        self.value_support, self.reward_support = value_support, reward_support
+        self.two_player = two_player
+        self.device = device
+        self._net_seconds = 0.0
+
+    def _recurrent(self, latents: torch.Tensor, actions: np.ndarray):
+        t = time.perf_counter()
+        with torch.no_grad():
+            a = torch.as_tensor(np.asarray(actions), dtype=torch.int64, device=self.device)
+            nxt, r_logits, p_logits, v_logits = self.net.recurrent_inference(latents, a)
+            reward = support_to_scalar(r_logits.float(), self.reward_support).cpu().numpy()
+            value = support_to_scalar(v_logits.float(), self.value_support).cpu().numpy()
+            logits = p_logits.float().cpu().numpy()
+        self._net_seconds += time.perf_counter() - t
+        return reward, value, logits, nxt
+
+    @torch.no_grad()
+    def run(self, obs: np.ndarray, legal: np.ndarray, to_play: np.ndarray | None, rng: np.random.Generator,
+            add_noise: bool, temperature: float = 1.0) -> SearchResult:
+        start = time.perf_counter()
+        self._net_seconds = 0.0
+        obs_t = torch.as_tensor(np.ascontiguousarray(obs), device=self.device)
+        latent, p_logits, v_logits = self.net.initial_inference(obs_t)
+        root_value = support_to_scalar(v_logits.float(), self.value_support).cpu().numpy()
+        root_logits = p_logits.float().cpu().numpy()
+        self._net_seconds += time.perf_counter() - start
+        out = search(latent, root_logits, root_value, legal, to_play, self._recurrent, self.cfg, rng,
+                     temperature=temperature, add_noise=add_noise, two_player=self.two_player)
+        counts = np.asarray(out.visit_counts, dtype=np.float32)
+        if self.cfg.gumbel:
+            target = np.asarray(out.policy, dtype=np.float32)
+        else:
+            target = counts / np.maximum(counts.sum(-1, keepdims=True), 1.0)
+        return SearchResult(counts, target, np.asarray(out.root_value, np.float32), np.asarray(out.action),
+                            self._net_seconds, time.perf_counter() - start)

@@ -1,0 +1,15 @@
+"""The one error type configuration problems raise: its message is a single line."""
+from __future__ import annotations
+
+import difflib
+from typing import Iterable
+
+
+class ConfigError(ValueError):
+    """A config problem found before anything starts; `str(err)` is one line for the user."""
+
+
+def closest(word: str, options: Iterable[str]) -> str:
+    """' (did you mean 'x'?)' for the closest option, or '' when none is close."""
+    match = difflib.get_close_matches(word, list(options), n=1, cutoff=0.5)
+    return f" (did you mean '{match[0]}'?)" if match else ""

@@ -1,0 +1,244 @@
+"""Load a run config: YAML defaults/overlays, then `--set a.b=value` overrides, then a typed
+check of every key, type and range. Every problem is one `ConfigError` line."""
+from __future__ import annotations
+
+import dataclasses
+import os
+import types
+import typing
+from pathlib import Path
+from typing import Any, Union
+
+import yaml
+
+from wmdist.config.errors import ConfigError, closest
+from wmdist.config.schema import RunConfig
+
+MAX_DEFAULTS_DEPTH = 8
+
+
+def _read_yaml(path: Path) -> dict:
+    if not path.is_file():
+        raise ConfigError(f"config file not found: {path}")
+    try:
+        data = yaml.safe_load(path.read_text()) or {}
+    except yaml.YAMLError as err:
+        mark = getattr(err, "problem_mark", None)
+        where = f" line {mark.line + 1}" if mark else ""
+        raise ConfigError(f"{path}:{where} is not valid YAML: {getattr(err, 'problem', err)}") from None
+    if not isinstance(data, dict):
+        raise ConfigError(f"{path}: top level must be a mapping, got {type(data).__name__}")
+    return data
+
+
+def _merge(base: dict, over: dict) -> dict:
+    """Deep merge: mappings merge key by key, anything else replaces."""
+    out = dict(base)
+    for k, v in over.items():
+        out[k] = _merge(out[k], v) if isinstance(v, dict) and isinstance(out.get(k), dict) else v
+    return out
+
+
+def load_yaml_tree(path: str | os.PathLike, depth: int = 0) -> dict:
+    """A file with its `defaults: [name, ...]` overlays (files beside it) merged underneath."""
+    path = Path(path)
+    if depth > MAX_DEFAULTS_DEPTH:
+        raise ConfigError(f"{path}: defaults nest deeper than {MAX_DEFAULTS_DEPTH} (a cycle?)")
+    data = _read_yaml(path)
+    defaults = data.pop("defaults", []) or []
+    if isinstance(defaults, str):
+        defaults = [defaults]
+    merged: dict = {}
+    for name in defaults:
+        ref = path.parent / (name if str(name).endswith((".yaml", ".yml")) else f"{name}.yaml")
+        merged = _merge(merged, load_yaml_tree(ref, depth + 1))
+    return _merge(merged, data)
+
+
+def apply_overrides(tree: dict, overrides: list[str]) -> dict:
+    """`a.b.c=value` pairs (value parsed as YAML) applied in order, last one wins."""
+    tree = dict(tree)
+    for item in overrides:
+        key, sep, raw = item.partition("=")
+        if not sep or not key.strip():
+            raise ConfigError(f"override {item!r} is not of the form key.path=value")
+        try:
+            value = yaml.safe_load(raw) if raw.strip() else ""
+        except yaml.YAMLError:
+            value = raw
+        parts = key.strip().split(".")
+        node = tree
+        for p in parts[:-1]:
+            nxt = node.get(p)
+            nxt = dict(nxt) if isinstance(nxt, dict) else {}
+            node[p] = nxt
+            node = nxt
+        node[parts[-1]] = value
+    return tree
+
+
+def _type_name(tp: Any) -> str:
+    return getattr(tp, "__name__", str(tp).replace("typing.", ""))
+
+
+def _convert(value: Any, tp: Any, key: str) -> Any:
+    origin = typing.get_origin(tp)
+    if origin in (Union, types.UnionType):
+        args = typing.get_args(tp)
+        if value is None and type(None) in args:
+            return None
+        errors = []
+        for arg in args:
+            if arg is type(None):
+                continue
+            try:
+                return _convert(value, arg, key)
+            except ConfigError as err:
+                errors.append(str(err))
+        raise ConfigError(errors[0] if errors else f"{key}: bad value {value!r}")
+    if tp is Any:
+        return value
+    if dataclasses.is_dataclass(tp):
+        if not isinstance(value, dict):
+            raise ConfigError(f"{key}: expected a mapping of {tp.__name__} fields, got {value!r}")
+        return build(tp, value, key)
+    if tp is bool:
+        if isinstance(value, bool):
+            return value
+    elif tp is int:
+        if isinstance(value, int) and not isinstance(value, bool):
+            return value
+        if isinstance(value, float) and value.is_integer():
+            return int(value)
+    elif tp is float:
+        if isinstance(value, (int, float)) and not isinstance(value, bool):
+            return float(value)
+    elif tp is str:
+        if isinstance(value, str):
+            return value
+        if isinstance(value, (int, float)) and not isinstance(value, bool):
+            return str(value)
+    elif origin in (list, tuple) or tp in (list, tuple):
+        if isinstance(value, (list, tuple)):
+            args = typing.get_args(tp)
+            inner = args[0] if args else Any
+            items = [_convert(v, inner, f"{key}[{i}]") for i, v in enumerate(value)]
+            return tuple(items) if (origin or tp) is tuple else items
+    elif origin is dict or tp is dict:
+        if isinstance(value, dict):
+            return dict(value)
+    else:
+        return value
+    raise ConfigError(f"{key}: expected {_type_name(tp)}, got {type(value).__name__} {value!r}")
+
+
+def _check_range(value: Any, meta: dict, key: str) -> None:
+    if value is None or isinstance(value, bool):
+        return
+    choices = meta.get("choices")
+    if choices is not None and value not in choices:
+        raise ConfigError(f"{key}: {value!r} is not one of {', '.join(map(repr, choices))}")
+    if not isinstance(value, (int, float)):
+        return
+    for name, bad, word in (("ge", lambda v, b: v < b, ">="), ("gt", lambda v, b: v <= b, ">"),
+                            ("le", lambda v, b: v > b, "<="), ("lt", lambda v, b: v >= b, "<")):
+        bound = meta.get(name)
+        if bound is not None and bad(value, bound):
+            raise ConfigError(f"{key}: {value!r} is out of range (must be {word} {bound})")
+
+
+def build(cls: type, data: dict, prefix: str = "") -> Any:
+    """A dataclass instance from a mapping, checking every key, type and range."""
+    hints = typing.get_type_hints(cls)
+    fields = {f.name: f for f in dataclasses.fields(cls)}
+    kwargs = {}
+    for key, value in data.items():
+        full = f"{prefix}.{key}" if prefix else str(key)
+        if key not in fields:
+            raise ConfigError(f"unknown key '{full}'{_suggest(prefix, key, fields)}")
+        value = _convert(value, hints[key], full)
+        _check_range(value, dict(fields[key].metadata), full)
+        kwargs[key] = value
+    try:
+        obj = cls(**kwargs)
+    except (TypeError, ValueError) as err:
+        raise ConfigError(f"{prefix or 'config'}: {err}") from None
+    return obj
+
+
+def _suggest(prefix: str, key: str, fields: dict) -> str:
+    hint = closest(key, fields)
+    return hint.replace("'", f"'{prefix}.", 1) if hint and prefix else hint
+
+
+def load_config(path: str | os.PathLike, overrides: list[str] | None = None) -> RunConfig:
+    """The resolved, checked run config for a YAML file plus overrides."""
+    tree = apply_overrides(load_yaml_tree(path), list(overrides or []))
+    return config_from_tree(tree, default_name=Path(path).stem)
+
+
+def config_from_tree(tree: dict, default_name: str = "run") -> RunConfig:
+    from wmdist.algos.registry import resolve
+
+    tree = dict(tree)
+    if "algo_name" in tree:
+        raise ConfigError("unknown key 'algo_name' (did you mean 'algo.name'?)")
+    algo_tree = dict(tree.pop("algo", None) or {})
+    name = algo_tree.pop("name", None)
+    if not name:
+        raise ConfigError("algo.name is missing (e.g. algo: {name: muzero})")
+    if not isinstance(name, str):
+        raise ConfigError(f"algo.name: expected str, got {name!r}")
+    algo_cls = resolve(name)
+    cfg = build(RunConfig, tree)
+    cfg.algo = build(algo_cls.Config, algo_tree, "algo")
+    cfg.algo_name = name
+    if not cfg.run.name:
+        cfg.run.name = default_name
+    check_consistency(cfg)
+    return cfg
+
+
+def check_consistency(cfg: RunConfig) -> None:
+    """Cross-field checks that a single field's range can't express (each section's own)."""
+    for section in (cfg.env, cfg.replay, cfg.algo):
+        validate = getattr(section, "validate", None)
+        if validate is None:
+            continue
+        try:
+            validate()
+        except ValueError as err:
+            raise ConfigError(str(err).strip().splitlines()[0]) from None
+
+
+def to_dict(cfg: Any) -> Any:
+    """Plain data for YAML (the algo section gets its `name` back)."""
+    if isinstance(cfg, RunConfig):
+        out = {f.name: to_dict(getattr(cfg, f.name)) for f in dataclasses.fields(cfg) if f.name != "algo_name"}
+        out["algo"] = {"name": cfg.algo_name, **to_dict(cfg.algo)}
+        return out
+    if dataclasses.is_dataclass(cfg):
+        return {f.name: to_dict(getattr(cfg, f.name)) for f in dataclasses.fields(cfg)}
+    if isinstance(cfg, (list, tuple)):
+        return [to_dict(v) for v in cfg]
+    if isinstance(cfg, dict):
+        return {k: to_dict(v) for k, v in cfg.items()}
+    return cfg
+
+
+def dump_yaml(cfg: RunConfig) -> str:
+    return yaml.safe_dump(to_dict(cfg), sort_keys=False, default_flow_style=False)
+
+
+def describe(cls: type, prefix: str = "") -> list[tuple[str, str, str]]:
+    """(key, default, doc) for every field, for `wmdist config --docs`."""
+    rows = []
+    for f in dataclasses.fields(cls):
+        key = f"{prefix}.{f.name}" if prefix else f.name
+        default = f.default if f.default is not dataclasses.MISSING else (
+            f.default_factory() if f.default_factory is not dataclasses.MISSING else None)  # type: ignore[misc]
+        if dataclasses.is_dataclass(default):
+            rows.extend(describe(type(default), key))
+        else:
+            rows.append((key, repr(default), f.metadata.get("doc", "")))
+    return rows

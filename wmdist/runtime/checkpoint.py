@@ -1,0 +1,78 @@
+"""Checkpoints: learner state (weights + optimiser), published weights, counters, replay.
+
+Layout: RUN_DIR/checkpoints/ckpt-<updates>/{learner.pt, weights.npz, counters.json, replay/}.
+A checkpoint is written to a temporary folder and renamed, so a crash mid-write never
+leaves a half checkpoint that resume would pick. Loading never unpickles code:
+`torch.load(weights_only=True)` and `np.load(allow_pickle=False)`.
+"""
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+CKPT_DIR = "checkpoints"
+
+
+def _tensorise(obj: Any) -> Any:
+    """numpy arrays -> tensors so the file loads with weights_only=True."""
+    if isinstance(obj, np.ndarray):
+        return torch.from_numpy(np.ascontiguousarray(obj))
+    if isinstance(obj, np.generic):
+        return obj.item()
+    if isinstance(obj, dict):
+        return {k: _tensorise(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return type(obj)(_tensorise(v) for v in obj)
+    return obj
+
+
+def save_checkpoint(run_dir: str | Path, learner_state: dict, weights: dict[str, np.ndarray], version: int,
+                    counters: dict, replay: Any | None, keep: int) -> Path:
+    root = Path(run_dir) / CKPT_DIR
+    root.mkdir(parents=True, exist_ok=True)
+    name = f"ckpt-{int(counters.get('updates', 0)):09d}-{int(counters.get('env_steps', 0)):012d}"
+    final = root / name
+    tmp = root / f".{name}.tmp"
+    shutil.rmtree(tmp, ignore_errors=True)
+    tmp.mkdir()
+    torch.save(_tensorise(learner_state), tmp / "learner.pt")
+    np.savez(tmp / "weights.npz", **{k: np.asarray(v) for k, v in weights.items()})
+    (tmp / "counters.json").write_text(json.dumps({**counters, "version": int(version)}, indent=1))
+    if replay is not None:
+        replay.save(str(tmp / "replay"))
+    shutil.rmtree(final, ignore_errors=True)
+    tmp.rename(final)
+    for old in list_checkpoints(run_dir)[:-keep]:
+        shutil.rmtree(old, ignore_errors=True)
+    return final
+
+
+def list_checkpoints(run_dir: str | Path) -> list[Path]:
+    root = Path(run_dir) / CKPT_DIR
+    if not root.is_dir():
+        return []
+    return sorted(p for p in root.iterdir() if p.is_dir() and p.name.startswith("ckpt-"))
+
+
+def latest_checkpoint(run_dir: str | Path) -> Path | None:
+    ckpts = list_checkpoints(run_dir)
+    return ckpts[-1] if ckpts else None
+
+
+def load_counters(ckpt: Path) -> dict:
+    return json.loads((ckpt / "counters.json").read_text())
+
+
+def load_learner_state(ckpt: Path) -> dict:
+    return torch.load(ckpt / "learner.pt", weights_only=True, map_location="cpu")
+
+
+def load_weights(ckpt: Path) -> tuple[int, dict[str, np.ndarray]]:
+    with np.load(ckpt / "weights.npz", allow_pickle=False) as data:
+        weights = {k: data[k] for k in data.files}
+    return int(load_counters(ckpt)["version"]), weights

@@ -1,0 +1,308 @@
+"""The training loop of the driver process: keeps every actor busy, gathers their stats,
+serves metrics, prints progress, writes logs, curves and checkpoints, and stops cleanly.
+
+Each actor works in short calls (a collector segment, a learner slice, a reanalyze job,
+an evaluation); the driver re-issues a call as soon as the previous one returns. A call
+that fails because its actor died is counted as a restart and re-issued (Ray restarts the
+actor, which pulls the current weights in its constructor); the learner dying ends the run
+with a message that names --resume.
+"""
+from __future__ import annotations
+
+import collections
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+
+from wmdist.runtime.checkpoint import save_checkpoint
+from wmdist.runtime.topology import ACTOR_DIED, Topology
+
+LEARNER_SLICE_SECONDS = 1.0
+
+
+@dataclass
+class Counters:
+    """Run totals that survive a resume (saved in every checkpoint)."""
+
+    env_steps: int = 0
+    episodes: int = 0
+    updates: int = 0
+    version: int = 0
+    elapsed_seconds: float = 0.0
+    reanalyzed: int = 0
+    sampled_sequences: int = 0
+    nan_skips: int = 0
+    eval_episodes: int = 0
+    restarts: dict = field(default_factory=lambda: {"collector": 0, "reanalyzer": 0, "evaluator": 0})
+    busy: dict = field(default_factory=lambda: {"collector": 0.0, "learner": 0.0, "reanalyzer": 0.0, "evaluator": 0.0})
+
+    def as_dict(self) -> dict:
+        return dict(self.__dict__)
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "Counters":
+        c = cls()
+        for k, v in d.items():
+            if hasattr(c, k):
+                setattr(c, k, v)
+        return c
+
+
+@dataclass
+class RunResult:
+    status: str  # "done" | "interrupted" | "nan_stop" | "learner_failed" | "error"
+    message: str
+    counters: Counters
+
+
+def _died(err: BaseException) -> bool:
+    return type(err).__name__ in ACTOR_DIED or any(t.__name__ in ACTOR_DIED for t in type(err).__mro__)
+
+
+class Driver:
+    def __init__(self, topo: Topology, counters: Counters, on_tick: Callable[[dict], None] | None = None,
+                 log_path: Path | None = None, plot: Callable[[], None] | None = None) -> None:
+        self.topo, self.c = topo, counters
+        self.cfg = topo.cfg
+        self.on_tick, self.log_path, self.plot = on_tick, log_path, plot
+        self.train_returns: collections.deque = collections.deque(maxlen=100)
+        self.train_lengths: collections.deque = collections.deque(maxlen=100)
+        self.eval_return: float | None = None
+        self.eval_length: float | None = None
+        self.losses: dict[str, float] = {}
+        self.collector_versions: dict[int, int] = {}
+        self.limiter_blocked = 0
+        self.inflight: dict[Any, tuple[str, int]] = {}
+        self.stop_reason: tuple[str, str] | None = None
+        self.t_start = time.monotonic()
+        self.elapsed0 = counters.elapsed_seconds
+        self.last_tick = self.last_plot = self.last_ckpt = self.last_eval = time.monotonic()
+        self.rates = {"env_steps": 0.0, "updates": 0.0}
+        self._rate_base = (time.monotonic(), counters.env_steps, counters.updates)
+        self.last_snapshot: dict = {}
+
+    # -- calls ---------------------------------------------------------------------------
+    def _issue(self, kind: str, i: int) -> None:
+        t = self.topo
+        if kind == "collector":
+            ref = t.collectors[i].run_segment.remote(self.c.env_steps, self.c.updates)
+        elif kind == "learner":
+            ref = t.learner.train_for.remote(LEARNER_SLICE_SECONDS, self.cfg.run.max_updates)
+        elif kind == "reanalyzer":
+            ref = t.reanalyzers[i].run_job.remote()
+        else:
+            ref = t.evaluator.evaluate.remote()
+        self.inflight[ref] = (kind, i)
+
+    def _reanalyze_due(self) -> bool:
+        """Pace reanalyzers: fresh targets for about `reanalyze.fraction` of learner samples."""
+        want = self.cfg.reanalyze.fraction * max(self.c.sampled_sequences, self.cfg.learner.batch_size)
+        return self.c.reanalyzed < want
+
+    def _handle(self, kind: str, i: int, res: dict) -> None:
+        c = self.c
+        if kind == "collector":
+            c.env_steps += int(res["env_steps"])
+            c.episodes += len(res["episodes"])
+            c.busy["collector"] += float(res.get("busy_seconds", 0.0))
+            self.train_returns.extend(res["episodes"])
+            self.train_lengths.extend(res["lengths"])
+            self.collector_versions[i] = int(res.get("version", -1))
+            self.limiter_blocked += int(bool(res.get("limiter_blocked")))
+        elif kind == "learner":
+            c.updates, c.version, c.nan_skips = int(res["updates"]), int(res["version"]), int(res["nan_skips"])
+            c.sampled_sequences = int(res["sampled_sequences"])
+            c.busy["learner"] = float(res["busy_seconds"])
+            self.learner_sample_wait = float(res.get("sample_wait_seconds", 0.0))
+            if res["losses"]:
+                self.losses = res["losses"]
+            if res["status"] == "nan_stop":
+                self.stop_reason = ("nan_stop", res["message"])
+            elif res["status"] == "error":
+                self.stop_reason = ("error", res["message"])
+        elif kind == "reanalyzer":
+            c.reanalyzed += int(res["reanalyzed"])
+            c.busy["reanalyzer"] += float(res.get("busy_seconds", 0.0))
+        else:
+            c.busy["evaluator"] += float(res.get("busy_seconds", 0.0))
+            if res["returns"]:
+                c.eval_episodes += len(res["returns"])
+                self.eval_return = float(np.mean(res["returns"]))
+                self.eval_length = float(np.mean(res["lengths"]))
+                self._log({"kind": "eval", "eval_return": self.eval_return, "eval_length": self.eval_length,
+                           "eval_version": res["version"]})
+
+    def _reissue(self, kind: str, i: int) -> None:
+        if self.stop_reason is not None:
+            return
+        if kind == "reanalyzer" and not self._reanalyze_due():
+            self.waiting_reanalyzers.add(i)
+            return
+        if kind == "evaluator":
+            self.evaluator_idle = True
+            return
+        self._issue(kind, i)
+
+    # -- the loop ------------------------------------------------------------------------
+    def elapsed(self) -> float:
+        return self.elapsed0 + time.monotonic() - self.t_start
+
+    def _budget_done(self) -> bool:
+        r = self.cfg.run
+        return bool((r.max_env_steps and self.c.env_steps >= r.max_env_steps)
+                    or (r.max_updates and self.c.updates >= r.max_updates)
+                    or (r.max_minutes and self.elapsed() >= r.max_minutes * 60))
+
+    def run(self) -> RunResult:
+        import ray
+
+        t = self.topo
+        self.waiting_reanalyzers: set[int] = set()
+        self.evaluator_idle = t.evaluator is not None
+        self.learner_sample_wait = 0.0
+        self._issue("learner", 0)
+        for i in range(len(t.collectors)):
+            self._issue("collector", i)
+        for i in range(len(t.reanalyzers)):
+            self.waiting_reanalyzers.add(i)
+        try:
+            while self.stop_reason is None:
+                ready, _ = ray.wait(list(self.inflight), num_returns=1, timeout=0.2)
+                for ref in ready:
+                    kind, i = self.inflight.pop(ref)
+                    try:
+                        res = ray.get(ref)
+                    except Exception as err:  # noqa: BLE001 - classified below
+                        if kind == "learner":
+                            self.stop_reason = ("learner_failed", f"the learner failed: {_one_line(err)}")
+                            break
+                        if _died(err):
+                            self.c.restarts[kind] = self.c.restarts.get(kind, 0) + 1
+                            self._reissue(kind, i)
+                            continue
+                        if kind == "collector":
+                            self.stop_reason = ("error", f"collector {i} failed: {_one_line(err)}")
+                            break
+                        raise
+                    self._handle(kind, i, res)
+                    if kind == "learner":
+                        self._maybe_checkpoint()
+                    self._reissue(kind, i)
+                for i in sorted(self.waiting_reanalyzers):
+                    if self._reanalyze_due():
+                        self.waiting_reanalyzers.discard(i)
+                        self._issue("reanalyzer", i)
+                now = time.monotonic()
+                if self.evaluator_idle and now - self.last_eval >= self.cfg.eval.every_seconds:
+                    self.evaluator_idle = False
+                    self.last_eval = now
+                    self._issue("evaluator", 0)
+                if now - self.last_tick >= self.cfg.run.log_every_seconds:
+                    self.tick()
+                if self._budget_done() and self.stop_reason is None:
+                    self.stop_reason = ("done", "budget reached")
+        except KeyboardInterrupt:
+            self.stop_reason = ("interrupted", "interrupted by the user")
+        status, message = self.stop_reason
+        self._drain()
+        self.tick(force_plot=True)
+        if status != "learner_failed":
+            self.checkpoint()
+        return RunResult(status, message, self.c)
+
+    def _drain(self, timeout: float = 30.0) -> None:
+        """Let in-flight calls finish so their data lands (bounded), then forget them."""
+        import ray
+
+        refs = [r for r, (k, _) in self.inflight.items() if k in ("collector", "learner", "evaluator")]
+        deadline = time.monotonic() + timeout
+        while refs and time.monotonic() < deadline:
+            ready, refs = ray.wait(refs, num_returns=1, timeout=max(deadline - time.monotonic(), 0.01))
+            for ref in ready:
+                kind, i = self.inflight.pop(ref)
+                try:
+                    self._handle(kind, i, ray.get(ref))
+                except Exception:  # noqa: BLE001 - a dying actor's last call is lost
+                    pass
+        self.inflight.clear()
+
+    # -- checkpoints, logs, metrics ---------------------------------------------------------
+    def _maybe_checkpoint(self) -> None:
+        every = self.cfg.checkpoint.every_seconds
+        if every > 0 and time.monotonic() - self.last_ckpt >= every:
+            self.checkpoint()
+
+    def checkpoint(self) -> Path | None:
+        import ray
+
+        self.last_ckpt = time.monotonic()
+        self.c.elapsed_seconds = self.elapsed()
+        try:
+            state = ray.get(self.topo.learner.state.remote(), timeout=120)
+            version, weights = ray.get(self.topo.learner.weights.remote(), timeout=120)
+        except Exception:  # noqa: BLE001 - the learner is gone: nothing newer to save
+            return None
+        replay = self.topo.replay if self.cfg.checkpoint.replay else None
+        return save_checkpoint(self.topo.run_dir, state, weights, version, self.c.as_dict(), replay,
+                               self.cfg.checkpoint.keep)
+
+    def _log(self, record: dict) -> None:
+        if self.log_path is None:
+            return
+        from wmdist.runtime.curves import write_jsonl
+
+        write_jsonl(self.log_path, {"time": round(self.elapsed(), 3), "env_steps": self.c.env_steps,
+                                    "updates": self.c.updates, **record})
+
+    def snapshot(self, replay_stats: dict | None = None) -> dict:
+        c = self.c
+        versions = [v for v in self.collector_versions.values() if v >= 0]
+        snap = {
+            "elapsed_seconds": self.elapsed(),
+            "env_steps": c.env_steps, "env_steps_per_second": self.rates["env_steps"],
+            "episodes": c.episodes, "updates": c.updates, "updates_per_second": self.rates["updates"],
+            "version": c.version, "version_gap": (c.version - min(versions)) if versions else 0,
+            "train_return": float(np.mean(self.train_returns)) if self.train_returns else None,
+            "train_length": float(np.mean(self.train_lengths)) if self.train_lengths else None,
+            "eval_return": self.eval_return, "eval_length": self.eval_length, "eval_episodes": c.eval_episodes,
+            "losses": dict(self.losses), "nan_skips": c.nan_skips, "reanalyzed": c.reanalyzed,
+            "sampled_sequences": c.sampled_sequences,
+            "restarts": dict(c.restarts), "busy": dict(c.busy), "replay": replay_stats or {},
+            "limiter_blocked_segments": self.limiter_blocked,
+        }
+        return snap
+
+    def tick(self, force_plot: bool = False) -> dict:
+        now = time.monotonic()
+        t0, e0, u0 = self._rate_base
+        if now - t0 > 0.5:
+            self.rates = {"env_steps": (self.c.env_steps - e0) / (now - t0), "updates": (self.c.updates - u0) / (now - t0)}
+            self._rate_base = (now, self.c.env_steps, self.c.updates)
+        self.last_tick = now
+        try:
+            replay_stats = self.topo.replay.stats()
+        except Exception:  # noqa: BLE001 - a restarting shard: show the last figures
+            replay_stats = self.last_snapshot.get("replay", {})
+        snap = self.snapshot(replay_stats)
+        self.last_snapshot = snap
+        self._log({"kind": "train", "train_return": snap["train_return"], "version": snap["version"],
+                   "env_steps_per_second": round(snap["env_steps_per_second"], 2),
+                   "updates_per_second": round(snap["updates_per_second"], 3),
+                   **{f"loss/{k}": v for k, v in snap["losses"].items()}})
+        if self.on_tick is not None:
+            self.on_tick(snap)
+        if self.plot is not None and (force_plot or now - self.last_plot >= self.cfg.run.plot_every_seconds):
+            self.last_plot = now
+            try:
+                self.plot()
+            except Exception:  # noqa: BLE001 - a plot must never stop training
+                pass
+        return snap
+
+
+def _one_line(err: BaseException) -> str:
+    text = str(err).strip().splitlines()
+    return f"{type(err).__name__}: {text[-1] if text else ''}"[:400]

@@ -1,0 +1,141 @@
+"""`wmdist eval RUN_DIR` and `wmdist dream RUN_DIR`: load a run's latest checkpoint and
+play greedy episodes (board games: against the exact solver or a human), or write the
+world model's open-loop prediction video."""
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+from typing import IO, Callable
+
+import numpy as np
+
+from wmdist.config.errors import ConfigError
+from wmdist.runtime import checkpoint as ck
+from wmdist.runtime.roles import build_algorithm
+from wmdist.runtime.train import env_spec_or_error, load_run_config
+
+
+def _load(run_dir: str):
+    cfg = load_run_config(run_dir)
+    ckpt = ck.latest_checkpoint(run_dir)
+    if ckpt is None:
+        raise ConfigError(f"{run_dir} has no checkpoint yet")
+    spec = env_spec_or_error(cfg)
+    algo = build_algorithm(cfg, spec, cfg.run.seed + 31_337)
+    version, weights = ck.load_weights(ckpt)
+    return cfg, spec, algo, version, weights, ckpt
+
+
+def _greedy(policy, obs: np.ndarray, legal: np.ndarray | None, to_play: int | None, first: bool) -> int:
+    actions, _ = policy.act(obs[None], np.array([first]), None if legal is None else legal[None],
+                            None if to_play is None else np.array([to_play]), False)
+    return np.asarray(actions)[0]
+
+
+def play_board(policy, env, agent_player: int, opponent: Callable[[object], int]) -> float:
+    """One game; returns +1 / 0 / -1 from the agent's point of view."""
+    env.reset()
+    first = True
+    while True:
+        mover = env.to_play()
+        if mover == agent_player:
+            action = int(_greedy(policy, env.game.observe(env.state), env.legal_actions(), mover, first))
+            first = False
+        else:
+            action = opponent(env.state)
+        _, reward, terminated, _ = env.step(action)
+        if terminated:
+            return reward if mover == agent_player else -reward
+
+
+def _human(env, out: IO[str]) -> Callable[[object], int]:
+    def ask(_state) -> int:
+        img = np.asarray(env.state.board).reshape(env.game.rows, env.game.cols)
+        for row in img:
+            print(" ".join(".XO"[c] for c in row), file=out)
+        legal = np.flatnonzero(env.legal_actions())
+        while True:
+            raw = input(f"your move {legal.tolist()}: ").strip()
+            if raw.isdigit() and int(raw) in legal:
+                return int(raw)
+            print("not a legal move", file=out)
+    return ask
+
+
+def evaluate_run(run_dir: str, episodes: int = 10, video: str | None = None, human: bool = False,
+                 out: IO[str] = sys.stdout) -> int:
+    cfg, spec, algo, version, weights, ckpt = _load(run_dir)
+    policy = algo.make_policy("cpu")
+    policy.set_weights(weights, version)
+    print(f"wmdist: {ckpt.name} (weights v{version}) on {cfg.env.id}", file=out)
+    if spec.players == 2:
+        from wmdist.envs.factory import make_env
+
+        env = make_env(cfg.env, cfg.run.seed)
+        if human:
+            opponent = _human(env, out)
+        elif cfg.env.id == "board:tictactoe":
+            from wmdist.envs.boardgames.solver import SolverOpponent
+
+            opponent = SolverOpponent(seed=cfg.run.seed).act
+        else:
+            rng = np.random.default_rng(cfg.run.seed)
+            opponent = lambda s: int(rng.choice(np.flatnonzero(env.legal_actions())))  # noqa: E731
+        results = {0: [], 1: []}
+        for g in range(episodes):
+            results[g % 2].append(play_board(policy, env, g % 2, opponent))
+        for p, rs in results.items():
+            rs = np.asarray(rs)
+            print(f"agent as player {p}: {len(rs)} games, won {(rs > 0).sum()}, drew {(rs == 0).sum()}, "
+                  f"lost {(rs < 0).sum()}", file=out)
+        return 0
+    from wmdist.envs.vector import make_vector_env
+    from wmdist.runtime.evaluator import play_episodes
+
+    venv = make_vector_env(cfg.env, min(episodes, cfg.eval.envs), cfg.run.seed + 5)
+    returns, lengths = play_episodes(policy, venv, episodes)
+    print("returns: " + " ".join(f"{r:.1f}" for r in returns), file=out)
+    print(f"mean return {np.mean(returns):.2f} +- {np.std(returns):.2f} over {len(returns)} episodes "
+          f"(mean length {np.mean(lengths):.0f})", file=out)
+    if video:
+        print(f"video: {record_video(cfg, algo, weights, version, video)}", file=out)
+    return 0
+
+
+def record_video(cfg, algo, weights, version: int, path: str, max_steps: int = 1000) -> str:
+    """One greedy episode rendered to a GIF."""
+    import imageio.v2 as imageio
+
+    from wmdist.envs.factory import make_env
+
+    env = make_env(cfg.env, cfg.run.seed + 11)
+    policy = algo.make_policy("cpu")
+    policy.set_weights(weights, version)
+    obs, frames, first = env.reset(), [], True
+    legal = env.legal_actions()
+    for _ in range(max_steps):
+        frames.append(env.render())
+        action = _greedy(policy, obs, legal, env.to_play() if env.spec.players == 2 else None, first)
+        first = False
+        obs, _, terminated, truncated = env.step(action)
+        legal = env.legal_actions()
+        if terminated or truncated:
+            break
+    imageio.mimsave(path, frames, duration=1 / 30)
+    return path
+
+
+def dream_run(run_dir: str, out: str | None = None, horizon: int = 45, stream: IO[str] = sys.stdout) -> int:
+    cfg, spec, algo, version, weights, ckpt = _load(run_dir)
+    try:
+        from wmdist.algos.dreamer.dream import open_loop_video
+    except ImportError as err:
+        raise ConfigError(f"dream needs the Dreamer package: {err}") from None
+    if cfg.algo_name != "dreamer":
+        raise ConfigError(f"dream shows a Dreamer world model; {run_dir} trained {cfg.algo_name!r}")
+    from wmdist.envs.factory import make_env
+
+    path = out or str(Path(run_dir) / "dream.gif")
+    env = make_env(cfg.env, cfg.run.seed + 17)
+    print(f"wmdist: dream video {open_loop_video(algo, weights, env, path, context=5, horizon=horizon)}", file=stream)
+    return 0

@@ -1,0 +1,69 @@
+"""Greedy evaluation: the evaluator role during training and `wmdist eval` afterwards."""
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import numpy as np
+
+from wmdist.algos.base import Policy
+from wmdist.config.schema import RunConfig
+from wmdist.envs.spec import EnvSpec
+from wmdist.runtime.roles import build_algorithm, set_threads
+from wmdist.runtime.weights import pull
+
+
+def play_episodes(policy: Policy, venv: Any, episodes: int, explore: bool = False,
+                  max_steps: int = 1_000_000) -> tuple[list[float], list[int]]:
+    """Run `episodes` episodes over a VectorEnv (greedy unless explore); returns returns and lengths.
+
+    Each env has a fixed quota of episodes (an even split), so short episodes are not
+    over-represented the way "first N to finish" would.
+    """
+    E = venv.num_envs
+    quota = np.array([episodes // E + (i < episodes % E) for i in range(E)])
+    done_count = np.zeros(E, np.int64)
+    ret = np.zeros(E)
+    length = np.zeros(E, np.int64)
+    returns: list[float] = []
+    lengths: list[int] = []
+    step = venv.reset()
+    for _ in range(max_steps):
+        if (done_count >= quota).all():
+            break
+        actions, _ = policy.act(step.obs, step.first, step.legal, step.to_play, explore)
+        step = venv.step(np.asarray(actions))
+        ret += step.reward
+        length += 1
+        for i in np.flatnonzero(step.terminated | step.truncated):
+            if done_count[i] < quota[i]:
+                returns.append(float(ret[i]))
+                lengths.append(int(length[i]))
+                done_count[i] += 1
+            ret[i], length[i] = 0.0, 0
+    return returns, lengths
+
+
+class EvaluatorRole:
+    def __init__(self, cfg: RunConfig, spec: EnvSpec, broker: Any, threads: int = 1) -> None:
+        from wmdist.envs.vector import make_vector_env
+
+        set_threads(threads)
+        self.cfg, self.broker = cfg, broker
+        seed = cfg.run.seed + 99_991
+        self.policy = build_algorithm(cfg, spec, seed).make_policy("cpu")
+        self.venv = make_vector_env(cfg.env, min(cfg.eval.envs, cfg.eval.episodes), seed)
+        self.version = -1
+
+    def evaluate(self) -> dict:
+        t0 = time.monotonic()
+        version, weights = pull(self.broker, self.version)
+        if weights is not None:
+            self.policy.set_weights(weights, version)
+            self.version = version
+        returns, lengths = play_episodes(self.policy, self.venv, self.cfg.eval.episodes)
+        return {"version": self.version, "returns": returns, "lengths": lengths,
+                "busy_seconds": time.monotonic() - t0}
+
+    def ping(self) -> bool:
+        return True

@@ -1,0 +1,175 @@
+"""Learner role: samples with prefetch, updates through the algorithm, publishes weights.
+
+Driven by the driver in short slices (`train_for`), so checkpoints and stats never race
+an update. A background thread keeps `learner.prefetch` batches sampled ahead, so the
+replay round trip overlaps compute; the queue is bounded.
+"""
+from __future__ import annotations
+
+import math
+import queue
+import threading
+import time
+from typing import Any
+
+import numpy as np
+
+from wmdist.algos.base import NonFiniteLoss
+from wmdist.config.schema import RunConfig
+from wmdist.envs.spec import EnvSpec
+from wmdist.runtime.roles import build_algorithm, device_for, set_threads
+
+
+class Prefetcher:
+    """A daemon thread that keeps a bounded queue of sampled batches."""
+
+    def __init__(self, replay: Any, batch_size: int, depth: int, timeout: float) -> None:
+        self.replay, self.batch_size, self.timeout = replay, batch_size, timeout
+        self.queue: queue.Queue = queue.Queue(maxsize=depth)
+        self.stop_event = threading.Event()
+        self.wait_seconds = 0.0
+        self.error: BaseException | None = None
+        self.thread = threading.Thread(target=self._loop, name="prefetch", daemon=True)
+        self.thread.start()
+
+    def _loop(self) -> None:
+        while not self.stop_event.is_set():
+            t0 = time.monotonic()
+            try:
+                sample = self.replay.sample(self.batch_size, timeout=self.timeout)
+            except Exception as err:  # noqa: BLE001 - surfaced to the learner loop
+                self.error = err
+                time.sleep(0.5)
+                continue
+            self.wait_seconds += time.monotonic() - t0
+            if sample is None:
+                continue
+            while not self.stop_event.is_set():
+                try:
+                    self.queue.put(sample, timeout=0.2)
+                    break
+                except queue.Full:
+                    continue
+
+    def get(self, timeout: float) -> Any:
+        try:
+            return self.queue.get(timeout=timeout)
+        except queue.Empty:
+            return None
+
+    def close(self) -> None:
+        self.stop_event.set()
+        self.thread.join(timeout=5.0)
+
+
+class LearnerRole:
+    def __init__(self, cfg: RunConfig, spec: EnvSpec, replay: Any, broker: Any, threads: int = 1) -> None:
+        set_threads(threads)
+        self.cfg, self.replay, self.broker = cfg, replay, broker
+        self.device = device_for(cfg.learner.gpus)
+        self.algo = build_algorithm(cfg, spec, cfg.run.seed)
+        self.learner = self.algo.make_learner(self.device)
+        self.updates = 0
+        self.version = 0
+        self.nan_skips = 0
+        self.nan_streak = 0
+        self.sampled_sequences = 0
+        self.busy_seconds = 0.0
+        self._sums: dict[str, float] = {}
+        self._counts: dict[str, int] = {}
+        self.prefetcher: Prefetcher | None = None
+        self.publish()
+
+    def _ensure_prefetch(self) -> Prefetcher:
+        if self.prefetcher is None:
+            c = self.cfg.learner
+            self.prefetcher = Prefetcher(self.replay, c.batch_size, c.prefetch, c.sample_timeout)
+        return self.prefetcher
+
+    def publish(self) -> int:
+        """One `ray.put` per version; the broker hands its ref to every puller."""
+        import ray
+
+        ref = ray.put(self.learner.get_weights())
+        ray.get(self.broker.publish.remote(self.version, [ref]))
+        self.replay.set_policy_version(self.version)  # replay drops data older than max_policy_lag
+        return self.version
+
+    def _record(self, metrics: dict[str, float]) -> None:
+        for k, v in metrics.items():
+            v = float(v)
+            if math.isfinite(v):
+                self._sums[k] = self._sums.get(k, 0.0) + v
+                self._counts[k] = self._counts.get(k, 0) + 1
+
+    def train_for(self, seconds: float, max_updates: int = 0) -> dict:
+        """Update for about `seconds` (or until `max_updates` in total); return stats."""
+        pf = self._ensure_prefetch()
+        if pf.error is not None:
+            err, pf.error = pf.error, None
+            return self._stats("error", f"sampling failed: {err}")
+        end = time.monotonic() + seconds
+        status, message = "ok", ""
+        while time.monotonic() < end and (max_updates <= 0 or self.updates < max_updates):
+            sample = pf.get(timeout=min(0.2, max(end - time.monotonic(), 0.01)))
+            if sample is None:
+                continue
+            t0 = time.monotonic()
+            batch = dict(sample.data, mask=sample.mask, is_weight=sample.is_weight)
+            self.sampled_sequences += len(sample.mask)
+            try:
+                result = self.learner.update(batch)
+            except NonFiniteLoss as err:
+                self.nan_skips += 1
+                self.nan_streak += 1
+                self.busy_seconds += time.monotonic() - t0
+                if self.nan_streak >= self.cfg.learner.max_nan_streak:
+                    status = "nan_stop"
+                    message = (f"{self.nan_streak} non-finite updates in a row (last: {err}); "
+                               f"stopping - lower the learning rate or check the data")
+                    break
+                continue
+            self.nan_streak = 0
+            self.updates += 1
+            self._record(result.metrics)
+            if result.priorities is not None:
+                self.replay.update_priorities(sample.keys, sample.stamps, np.asarray(result.priorities, np.float64))
+            if self.updates % self.cfg.learner.publish_every == 0:
+                self.version += 1
+                self.publish()
+            self.busy_seconds += time.monotonic() - t0
+        return self._stats(status, message)
+
+    def _stats(self, status: str, message: str) -> dict:
+        losses = {k: self._sums[k] / self._counts[k] for k in self._sums}
+        self._sums, self._counts = {}, {}
+        pf = self.prefetcher
+        return {"status": status, "message": message, "updates": self.updates, "version": self.version,
+                "nan_skips": self.nan_skips, "sampled_sequences": self.sampled_sequences,
+                "busy_seconds": self.busy_seconds, "sample_wait_seconds": pf.wait_seconds if pf else 0.0,
+                "losses": losses}
+
+    # -- checkpoints ---------------------------------------------------------------------
+    def state(self) -> dict:
+        return {"learner": self.learner.state_dict(), "updates": self.updates, "version": self.version,
+                "nan_skips": self.nan_skips, "sampled_sequences": self.sampled_sequences}
+
+    def weights(self) -> tuple[int, dict]:
+        return self.version, self.learner.get_weights()
+
+    def load(self, state: dict) -> int:
+        self.learner.load_state_dict(state["learner"])
+        self.updates = int(state["updates"])
+        self.version = int(state["version"])
+        self.nan_skips = int(state.get("nan_skips", 0))
+        self.sampled_sequences = int(state.get("sampled_sequences", 0))
+        self.publish()
+        return self.version
+
+    def close(self) -> None:
+        if self.prefetcher is not None:
+            self.prefetcher.close()
+            self.prefetcher = None
+
+    def ping(self) -> bool:
+        return True

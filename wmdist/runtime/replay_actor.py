@@ -1,0 +1,96 @@
+"""Ray actors of the replay service: thin wrappers that forward to `wmdist.replay`.
+
+`ShardActor` holds one `ReplayShard` (threaded: a blocking call never stalls the others);
+with the redis backend it rebuilds its index from redis in `__init__`, so a Ray restart
+(`max_restarts`) after the process died brings back every acknowledged sequence.
+`LimiterActor` holds the one `RateLimiter` of the run (shared by all shards) and the
+learner's current policy version (for `max_policy_lag`).
+"""
+from __future__ import annotations
+
+import os
+
+import numpy as np
+
+from wmdist.algos.base import FieldSpec
+from wmdist.replay.batch import SequenceBatch
+from wmdist.replay.limiter import RateLimiter
+from wmdist.replay.shard import ReplayShard
+from wmdist.replay.storage_memory import MemoryStorage
+
+
+class ShardActor:
+    def __init__(self, fields: dict[str, FieldSpec], seq_len: int, capacity: int, sampler: str, alpha: float,
+                 shard_id: int, seed: int, backend: str, redis_url: str = "", password_file: str = "",
+                 namespace: str = "") -> None:
+        if backend == "redis":
+            from wmdist.replay.storage_redis import RedisStorage, connect
+
+            storage = RedisStorage(fields, capacity, seq_len, connect(redis_url, password_file), namespace)
+        else:
+            storage = MemoryStorage(fields, capacity, seq_len)
+        self.shard = ReplayShard(fields, seq_len, capacity, sampler, alpha, storage, seed, shard_id)
+
+    def pid(self) -> int:
+        return os.getpid()
+
+    def insert(self, batch: SequenceBatch, min_version: int | None) -> int:
+        return self.shard.insert(batch, min_version)
+
+    def mass(self) -> tuple[int, float, int]:
+        return self.shard.mass()
+
+    def sample(self, k: int, beta: float, global_count: int, global_mass: float) -> dict:
+        return self.shard.sample(k, beta, global_count, global_mass)
+
+    def update_priorities(self, slots: np.ndarray, stamps: np.ndarray, priorities: np.ndarray) -> int:
+        return self.shard.update_priorities(slots, stamps, priorities)
+
+    def write_back(self, slots: np.ndarray, stamps: np.ndarray, fields: dict[str, np.ndarray]) -> int:
+        return self.shard.write_back(slots, stamps, fields)
+
+    def stats(self) -> dict[str, float]:
+        return self.shard.stats()
+
+    def save(self, path: str) -> None:
+        self.shard.save(path)
+
+    def restore(self, path: str) -> None:
+        self.shard.restore(path)
+
+    def close(self) -> None:
+        self.shard.close()
+
+
+class LimiterActor:
+    def __init__(self, samples_per_insert: float, min_size: int, error_buffer: float) -> None:
+        self.limiter = RateLimiter(samples_per_insert, min_size, error_buffer)
+        self.version = -1  # latest learner policy version (-1 = none published yet)
+
+    def acquire_insert(self, n: int, timeout: float | None) -> tuple[bool, int]:
+        return self.limiter.acquire_insert(n, timeout), self.version
+
+    def commit_insert(self, n_steps: int) -> None:
+        self.limiter.commit_insert(n_steps)
+
+    def acquire_sample(self, n: int, timeout: float | None) -> bool:
+        return self.limiter.acquire_sample(n, timeout)
+
+    def set_size(self, size_steps: int) -> None:
+        self.limiter.set_size(size_steps)
+
+    def set_version(self, version: int) -> None:
+        self.version = max(self.version, int(version))
+
+    def state_dict(self) -> dict:
+        return {**self.limiter.state_dict(), "version": self.version}
+
+    def load_state_dict(self, state: dict) -> None:
+        self.limiter.load_state_dict(state)
+        self.version = int(state.get("version", -1))
+
+    def stats(self) -> dict[str, float]:
+        return {**self.limiter.stats(), "policy_version": float(self.version)}
+
+    def close(self) -> None:
+        self.limiter.close()

@@ -1,0 +1,82 @@
+"""Driver-side telemetry: the driver's snapshot -> Prometheus metrics and the console view."""
+from __future__ import annotations
+
+import re
+from pathlib import Path
+from typing import IO
+
+from wmdist.config.schema import RunConfig
+
+ROLES = ("collector", "learner", "reanalyzer", "evaluator")
+
+
+def publish(hub, snap: dict) -> None:
+    """Set every wmdist_ metric from one driver snapshot (counters are set to totals)."""
+    s = hub.set
+    s("wmdist_env_steps_total", snap["env_steps"])
+    s("wmdist_env_steps_per_second", snap["env_steps_per_second"])
+    s("wmdist_episodes_total", snap["episodes"], role="train")
+    s("wmdist_episodes_total", snap["eval_episodes"], role="eval")
+    for role in ("train", "eval"):
+        if snap.get(f"{role}_return") is not None:
+            s("wmdist_episode_return", snap[f"{role}_return"], role=role)
+        if snap.get(f"{role}_length") is not None:
+            s("wmdist_episode_length", snap[f"{role}_length"], role=role)
+    s("wmdist_learner_updates_total", snap["updates"])
+    s("wmdist_learner_updates_per_second", snap["updates_per_second"])
+    for name, value in snap["losses"].items():
+        s("wmdist_learner_loss", value, name=name)
+    s("wmdist_learner_nan_skips_total", snap["nan_skips"])
+    s("wmdist_weights_version", snap["version"])
+    s("wmdist_weights_version_gap", snap["version_gap"])
+    s("wmdist_reanalyzed_sequences_total", snap["reanalyzed"])
+    for role in ROLES:
+        s("wmdist_busy_seconds_total", snap["busy"].get(role, 0.0), role=role)
+        if role != "learner":
+            s("wmdist_actor_restarts_total", snap["restarts"].get(role, 0), role=role)
+    replay = snap.get("replay") or {}
+    s("wmdist_policy_lag_drops_total", replay.get("drops_policy_lag", 0))
+    # measured train ratio: sampled sequences per inserted sequence (replay.samples_per_insert)
+    s("wmdist_train_ratio", replay.get("samples", 0) / max(replay.get("inserts", 0), 1))
+    for key, value in replay.items():
+        m = _SHARD_KEY.match(key)
+        if not m:
+            continue
+        shard, what = m.group(1), m.group(2)
+        if what in _SHARD_METRICS:
+            s(_SHARD_METRICS[what], value, shard=shard)
+        elif what.startswith("drops_"):
+            s("wmdist_replay_drops_total", value, shard=shard, reason=what[len("drops_"):])
+    s("wmdist_limiter_wait_seconds_total", replay.get("insert_wait_seconds", 0.0), side="insert")
+    s("wmdist_limiter_wait_seconds_total", replay.get("sample_wait_seconds", 0.0), side="sample")
+
+
+_SHARD_KEY = re.compile(r"^shard(\d+)_(\w+)$")
+_SHARD_METRICS = {"size_steps": "wmdist_replay_size_steps", "inserts": "wmdist_replay_inserts_total",
+                  "samples": "wmdist_replay_samples_total"}
+
+
+class Telemetry:
+    """Owns the metrics exporter and the console progress view of one training run."""
+
+    def __init__(self, cfg: RunConfig, run_dir: Path, out: IO[str]) -> None:
+        from wmdist.metrics import MetricsHub
+        from wmdist.runtime.progress import Progress
+
+        self.hub = None
+        if cfg.metrics.enabled:
+            self.hub = MetricsHub(host=cfg.metrics.host, port=cfg.metrics.port)
+            self.hub.start()
+            (run_dir / "metrics_port").write_text(str(self.hub.port))
+            print(f"wmdist: metrics at {self.hub.url}", file=out, flush=True)
+        self.progress = Progress(cfg.run.max_env_steps, cfg.run.max_minutes, stream=out)
+
+    def update(self, snap: dict) -> None:
+        if self.hub is not None:
+            publish(self.hub, snap)
+        self.progress.update(snap)
+
+    def close(self) -> None:
+        self.progress.close()
+        if self.hub is not None:
+            self.hub.close()

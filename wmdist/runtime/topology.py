@@ -1,0 +1,116 @@
+"""The one place that knows the process layout.
+
+    N collectors (E envs each)  ──sequences──►  S replay shards  ◄──samples── learner
+    M reanalyzers ◄─samples / write-backs─►  replay                 │ one ray.put per version
+    collectors, reanalyzers, evaluator  ◄──pull at segment boundaries── weight broker
+
+Ray is embedded (a local instance) unless `--address` / `ray.address` names a cluster.
+Every role's resources come from the config, so a GPU learner with CPU collectors, or
+collectors pinned to tagged nodes, is a config change.
+"""
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from wmdist.config.schema import RunConfig
+from wmdist.envs.spec import EnvSpec
+from wmdist.runtime.resources import BROKER_CPUS, check_fits, roles
+
+# Actor errors that mean "the process died" (Ray restarts collectors and reanalyzers).
+ACTOR_DIED = ("RayActorError", "ActorDiedError", "ActorUnavailableError")
+
+
+def start_ray(cfg: RunConfig) -> None:
+    """Join `ray.address`, or start an embedded local instance sized by the config."""
+    import ray
+
+    if ray.is_initialized():
+        return
+    if cfg.ray.address:
+        ray.init(address=cfg.ray.address, log_to_driver=True, configure_logging=False)
+        return
+    kwargs: dict[str, Any] = {
+        "num_cpus": cfg.ray.num_cpus or os.cpu_count() or 1,
+        "include_dashboard": False,
+        "object_store_memory": cfg.ray.object_store_mb * 1024 * 1024,
+        "configure_logging": False,
+        "log_to_driver": True,
+    }
+    if cfg.ray.num_gpus >= 0:
+        kwargs["num_gpus"] = cfg.ray.num_gpus
+    ray.init(**kwargs)
+
+
+@dataclass
+class Topology:
+    cfg: RunConfig
+    spec: EnvSpec
+    run_dir: Path
+    replay: Any
+    broker: Any
+    learner: Any
+    collectors: list[Any] = field(default_factory=list)
+    reanalyzers: list[Any] = field(default_factory=list)
+    evaluator: Any = None
+
+    def shutdown(self) -> None:
+        import ray
+
+        try:
+            ray.get(self.learner.close.remote(), timeout=10)
+        except Exception:  # noqa: BLE001 - shutting down anyway
+            pass
+        try:
+            self.replay.close()
+        except Exception:  # noqa: BLE001
+            pass
+        for actor in [*self.collectors, *self.reanalyzers, self.evaluator, self.learner, self.broker]:
+            if actor is not None:
+                try:
+                    ray.kill(actor, no_restart=True)
+                except Exception:  # noqa: BLE001
+                    pass
+
+
+def build(cfg: RunConfig, spec: EnvSpec, run_dir: Path, fields: dict) -> Topology:
+    """Create every actor (after checking the cluster can hold them all)."""
+    import ray
+
+    from wmdist.replay.config import ReplayConfig  # noqa: F401  (documents the dependency)
+    from wmdist.runtime.collector import Collector
+    from wmdist.runtime.evaluator import EvaluatorRole
+    from wmdist.runtime.learner import LearnerRole
+    from wmdist.runtime.reanalyzer import ReanalyzerRole
+    from wmdist.runtime.replay_client import create_replay
+    from wmdist.runtime.weights import WeightBroker
+
+    check_fits(cfg, ray.cluster_resources())
+    res = roles(cfg)
+    replay = create_replay(cfg.replay, fields, str(run_dir), cfg.run.name)
+    broker = ray.remote(WeightBroker).options(num_cpus=BROKER_CPUS).remote()
+    lres = res["learner"][0]
+    learner = ray.remote(LearnerRole).options(**lres.options(), max_restarts=0, max_concurrency=1).remote(
+        cfg, spec, replay, broker, lres.threads)
+    topo = Topology(cfg, spec, run_dir, replay, broker, learner)
+    ray.get(learner.ping.remote())  # version 0 is published before anyone acts
+
+    cres = res["collector"][0]
+    restart = dict(max_restarts=cfg.actors.max_restarts, max_task_retries=0)
+    topo.collectors = [
+        ray.remote(Collector).options(**cres.options(), **restart).remote(cfg, spec, i, replay, broker, cres.threads)
+        for i in range(cfg.actors.num)
+    ]
+    rres = res["reanalyzer"][0]
+    topo.reanalyzers = [
+        ray.remote(ReanalyzerRole).options(**rres.options(), max_restarts=-1, max_task_retries=0).remote(
+            cfg, spec, i, replay, broker, rres.threads)
+        for i in range(cfg.reanalyze.num)
+    ]
+    if "evaluator" in res:
+        eres = res["evaluator"][0]
+        topo.evaluator = ray.remote(EvaluatorRole).options(**eres.options(), max_restarts=-1).remote(
+            cfg, spec, broker, eres.threads)
+    return topo

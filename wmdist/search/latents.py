@@ -1,0 +1,125 @@
+"""Latent store: every node's latent kept as raw bytes in one preallocated [B, N, F] buffer.
+
+Leaves (numpy arrays or CPU torch tensors, leading dim B) are packed side by side into a
+row of F bytes (each leaf's slot 8-byte aligned). The numba kernels copy rows in and out by
+node index, so one simulation costs two row copies per batch row whatever the dtype, and
+`recurrent_fn` receives numpy / torch views of the gathered rows (torch via from_numpy,
+zero-copy) in the same nested tuple/list structure as the root latents.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+try:  # torch is a project dependency, but search works on numpy alone
+    import torch
+except ImportError:  # pragma: no cover
+    torch = None
+
+
+def _is_tensor(x: Any) -> bool:
+    return torch is not None and isinstance(x, torch.Tensor)
+
+
+def _flatten(tree: Any) -> tuple[list[Any], Any]:
+    """Leaves in order and a structure spec: None for a leaf, else (type, [child specs])."""
+    if isinstance(tree, (tuple, list)):
+        leaves: list[Any] = []
+        specs = []
+        for item in tree:
+            sub_leaves, sub_spec = _flatten(item)
+            leaves.extend(sub_leaves)
+            specs.append(sub_spec)
+        return leaves, (type(tree), specs)
+    if isinstance(tree, np.ndarray) or _is_tensor(tree):
+        return [tree], None
+    raise ValueError(f"latents must be numpy arrays, torch tensors or tuples/lists of them, got {type(tree).__name__}")
+
+
+def _unflatten(spec: Any, leaves: list[Any], pos: int = 0) -> tuple[Any, int]:
+    if spec is None:
+        return leaves[pos], pos + 1
+    kind, child_specs = spec
+    items = []
+    for child in child_specs:
+        item, pos = _unflatten(child, leaves, pos)
+        items.append(item)
+    return kind(items), pos
+
+
+@dataclass(frozen=True)
+class _Slot:
+    is_torch: bool
+    dtype: np.dtype
+    shape: tuple[int, ...]  # per-row shape (without B)
+    offset: int  # byte offset in the row
+    nbytes: int
+
+
+def _numpy_dtype(leaf: Any) -> np.dtype:
+    if not _is_tensor(leaf):
+        return leaf.dtype
+    if leaf.device.type != "cpu":
+        raise ValueError(f"latent tensors must be on the CPU, got device {leaf.device}")
+    try:
+        return torch.empty(0, dtype=leaf.dtype).numpy().dtype
+    except TypeError as exc:
+        raise ValueError(f"latent tensor dtype {leaf.dtype} has no numpy equivalent") from exc
+
+
+class LatentStore:
+    """Byte rows of every node's latent for B trees of `num_nodes` nodes."""
+
+    def __init__(self, root_latents: Any, batch: int, num_nodes: int) -> None:
+        leaves, self._spec = _flatten(root_latents)
+        slots = []
+        offset = 0
+        for leaf in leaves:
+            if leaf.ndim < 1 or leaf.shape[0] != batch:
+                raise ValueError(f"every latent leaf needs leading dim B={batch}, got shape {tuple(leaf.shape)}")
+            dtype = np.dtype(_numpy_dtype(leaf))
+            if dtype.hasobject:
+                raise ValueError("latents with object dtype are not supported")
+            shape = tuple(int(d) for d in leaf.shape[1:])
+            nbytes = int(np.prod(shape, dtype=np.int64)) * dtype.itemsize
+            slots.append(_Slot(_is_tensor(leaf), dtype, shape, offset, nbytes))
+            offset += -(-nbytes // 8) * 8  # keep every slot 8-byte aligned
+        self.row_bytes = max(offset, 8)
+        self._slots = slots
+        self.store = np.zeros((batch, num_nodes, self.row_bytes), dtype=np.uint8)  # [B, N, F]
+        self.staged = np.zeros((batch, self.row_bytes), dtype=np.uint8)  # [B, F] incoming latents
+        self.gathered = np.zeros((batch, self.row_bytes), dtype=np.uint8)  # [B, F] parents' latents
+        self._staged_views = [self._typed_view(self.staged, s) for s in slots]
+        gathered_leaves = [self._typed_view(self.gathered, s) for s in slots]
+        self.gathered_latents, _ = _unflatten(self._spec, gathered_leaves)
+        self.stage(root_latents)
+
+    @staticmethod
+    def _typed_view(buf: np.ndarray, slot: _Slot) -> Any:
+        """A [B, *shape] view of the slot's bytes (numpy, or torch sharing the memory)."""
+        raw = buf[:, slot.offset : slot.offset + slot.nbytes]
+        view = raw.view(slot.dtype).reshape((buf.shape[0],) + slot.shape)
+        assert np.shares_memory(view, buf)
+        return torch.from_numpy(view) if slot.is_torch else view
+
+    def stage(self, latents: Any) -> None:
+        """Copy `latents` (same structure, shapes and kinds as the roots) into the staging row."""
+        leaves, spec = _flatten(latents)
+        if len(leaves) != len(self._slots):
+            raise ValueError(f"recurrent_fn returned {len(leaves)} latent leaves, expected {len(self._slots)}")
+        for leaf, slot, view in zip(leaves, self._slots, self._staged_views):
+            if tuple(leaf.shape[1:]) != slot.shape or leaf.shape[0] != view.shape[0]:
+                raise ValueError(
+                    f"latent leaf shape {tuple(leaf.shape)} differs from the root's {(view.shape[0],) + slot.shape}"
+                )
+            if slot.is_torch:
+                if not _is_tensor(leaf):
+                    raise ValueError("latent leaf changed from torch tensor to numpy array")
+                with torch.no_grad():
+                    view.copy_(leaf)
+            else:
+                if _is_tensor(leaf):
+                    raise ValueError("latent leaf changed from numpy array to torch tensor")
+                np.copyto(view, leaf, casting="same_kind")
