@@ -7,7 +7,7 @@ import re
 import time
 
 from tests.deploy.prom import alert_rules, dashboard_queries, query, running_prometheus
-from tests.deploy.scripted_run import scripted_run
+from tests.deploy.real_run import real_run
 from wmdist.runtime.monitor import write_prometheus_config
 
 
@@ -27,7 +27,7 @@ def test_every_dashboard_query_and_alert_expression_returns_data(ray_session, tm
     alerts = alert_rules()
     sd = tmp_path / "prom_metrics_service_discovery.json"
     _ray_sd_file(ray_session, sd)
-    with scripted_run() as source:
+    with real_run(tmp_path) as source:
         config = write_prometheus_config(tmp_path / "monitor", source.port, ray_sd_path=str(sd), scrape_interval="1s")
         with running_prometheus(config, tmp_path / "tsdb") as prom:
             # Wait until every panel query has data (rates need two scrapes; Ray's agent reports every few s).

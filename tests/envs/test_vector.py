@@ -23,7 +23,7 @@ class Countdown(Env):
         return np.array([self.episode, self.t], np.float32), float(action), end and not self.truncate, end and self.truncate
 
     def legal_actions(self):
-        return np.array([True, self.t % 2 == 0, False])
+        return np.array([True, True, self.t == 0])  # action 2 only at an episode's start
 
     def render(self):
         return np.zeros((4, 4, 3), np.uint8)
@@ -38,13 +38,13 @@ def test_same_step_auto_reset_bookkeeping():
     np.testing.assert_array_equal(s.final_obs, s.obs)
     s = vec.step(np.array([1, 2]))
     assert s.reward.dtype == np.float32 and s.reward.tolist() == [1.0, 2.0] and not s.first.any()
-    s = vec.step(np.array([1, 2]))  # env 0 terminates on its 2nd step
+    s = vec.step(np.array([1, 1]))  # env 0 terminates on its 2nd step
     assert s.terminated.tolist() == [True, False] and s.truncated.tolist() == [False, False]
     assert s.first.tolist() == [True, False]
     np.testing.assert_array_equal(s.final_obs[0], [0, 2])  # last obs of the ended episode
     np.testing.assert_array_equal(s.obs[0], [1, 0])  # already the next episode's first obs
     np.testing.assert_array_equal(s.final_obs[1], s.obs[1])
-    assert s.legal.shape == (2, 3) and s.legal[0].tolist() == [True, True, False]  # legal for the new obs
+    assert s.legal.shape == (2, 3) and s.legal[:, 2].tolist() == [True, False]  # legal for the new obs
     s = vec.step(np.array([0, 0]))  # env 1 truncates on its 3rd step
     assert s.truncated.tolist() == [False, True] and s.first.tolist() == [False, True]
     assert envs[0].seeds == [10, None] and envs[1].seeds == [11, None]  # auto-resets continue the stream
@@ -92,6 +92,14 @@ def test_vector_board_games_report_legal_and_to_play():
     for a in (0, 3, 1, 4):
         s = vec.step(np.array([a, 8 - a]))
     assert s.to_play.tolist() == [0, 0] and not s.legal[0, 0] and not s.legal[1, 8]
+    before = [e.state for e in vec.envs]
+    with pytest.raises(ValueError, match="illegal action 0 for env 0 .*no env was stepped"):
+        vec.step(np.array([0, 2]))  # env 0's cell 0 is taken; env 1's move is fine
+    with pytest.raises(ValueError, match=r"action 9 of env 1 out of range \[0, 9\)"):
+        vec.step(np.array([2, 9]))
+    with pytest.raises(ValueError, match="must be integers"):
+        vec.step(np.array([2.0, 6.0]))
+    assert [e.state for e in vec.envs] == before
     s = vec.step(np.array([2, 6]))  # both complete a row: player 0 wins, boards auto-reset
     assert s.reward.tolist() == [1.0, 1.0] and s.terminated.all() and s.first.all()
     assert s.to_play.tolist() == [0, 0] and s.legal.all() and s.final_obs[0, 18:].sum() == 9

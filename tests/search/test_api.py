@@ -85,10 +85,10 @@ def test_value_prefix_reset_flags_follow_the_horizon() -> None:
     config = SearchConfig(num_simulations=30, value_prefix=True, lstm_horizon=horizon, discount=1.0)
     out = search(np.zeros((3, 1)), np.zeros((3, 2)), np.zeros(3), np.ones((3, 2), bool), None, recurrent_fn,
                  config, np.random.default_rng(0), add_noise=False)
-    # prefix 1 everywhere: the edge reward is 1 right after a reset and 0 inside a segment,
-    # so every root child's Q is 1 (depth 1 reward 1, depth 2 reward 0, depth 3 reward 1 * ...)
+    # prefix 1 everywhere: the edge reward is 1 right after a reset (depths 1, 3, ...) and
+    # 0 inside a segment, so Q >= 1, and > 1 once a depth-3 node is under the child.
     assert out.visit_counts.sum() == 90
-    assert np.all(out.q_values >= 1.0)
+    assert np.all(out.q_values >= 1.0) and out.q_values.max() > 1.0
 
 
 @pytest.mark.parametrize(

@@ -139,7 +139,7 @@ def run(quick: bool = False) -> Iterator[dict]:
 
     started = not ray.is_initialized()
     if started:
-        ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False, configure_logging=False)
+        ray.init(address="local", num_cpus=2, include_dashboard=False, log_to_driver=False, configure_logging=False)
     try:
         with tempfile.TemporaryDirectory(prefix="wmdist-bench-replay-") as run_dir:
             kinds = ["vector"] if quick else ["vector", "pixels"]

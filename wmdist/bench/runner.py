@@ -8,7 +8,7 @@ from typing import IO
 
 from wmdist.config.errors import ConfigError, closest
 
-BENCHES = ("mcts", "replay", "selfplay", "dreamer")
+BENCHES = ("mcts", "replay", "selfplay", "dreamer", "envs")
 
 
 def run_bench(name: str, as_json: bool = False, quick: bool = False, out: IO[str] = sys.stdout) -> int:

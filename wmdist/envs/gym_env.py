@@ -26,7 +26,10 @@ class GymEnv(Env):
         if cfg.time_limit:
             # Replace the registered TimeLimit (counted in raw env steps).
             kwargs["max_episode_steps"] = cfg.time_limit * self._repeat
-        self._env = gym.make(gym_id, render_mode="rgb_array", **kwargs)
+        try:
+            self._env = gym.make(gym_id, render_mode="rgb_array", **kwargs)
+        except gym.error.DependencyNotInstalled as e:
+            raise ValueError(f"gym:{gym_id} needs an extra package: {str(e).splitlines()[0]}") from None
         self._seed: int | None = int(seed)
         try:
             self._build_spec(cfg, gym_id)

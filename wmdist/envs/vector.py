@@ -69,6 +69,7 @@ class VectorEnv:
         self.num_envs = len(self.envs)
         self._seed: int | None = seed  # used by the first reset() unless one is given
         self._needs_reset = True
+        self._legal: np.ndarray | None = None  # [E, A] mask of the last returned obs
 
     def reset(self, seed: int | None = None) -> VecStep:
         """Start a new episode in every env (env i with `seed + i` when seeded)."""
@@ -88,6 +89,8 @@ class VectorEnv:
         want = (self.num_envs, *self.spec.action_shape)
         if actions.shape != want:
             raise ValueError(f"actions must have shape {want}, got {actions.shape}")
+        if self._legal is not None:
+            self._check_legal(actions)  # before stepping any env, so a bad batch changes nothing
         obs_list, rewards, terms, truncs, ended = [], [], [], [], []
         for i, env in enumerate(self.envs):
             o, r, term, trunc = env.step(actions[i])
@@ -108,6 +111,19 @@ class VectorEnv:
             obs, np.asarray(rewards, np.float32), np.asarray(terms, bool), np.asarray(truncs, bool), final_obs, first
         )
 
+    def _check_legal(self, actions: np.ndarray) -> None:
+        n = self.spec.num_actions
+        if actions.dtype.kind not in "iu":
+            raise ValueError(f"discrete actions must be integers, got dtype {actions.dtype}")
+        bad = np.flatnonzero((actions < 0) | (actions >= n))
+        if bad.size:
+            i = int(bad[0])
+            raise ValueError(f"action {int(actions[i])} of env {i} out of range [0, {n}); no env was stepped")
+        bad = np.flatnonzero(~self._legal[np.arange(self.num_envs), actions])
+        if bad.size:
+            i = int(bad[0])
+            raise ValueError(f"illegal action {int(actions[i])} for env {i} (not in its legal mask); no env was stepped")
+
     def _stack(self, rows: list[np.ndarray]) -> np.ndarray:
         # Row assignment into a preallocated array: cheaper than np.stack for small rows.
         out = np.empty((self.num_envs, *self.spec.obs_shape), self.spec.obs_dtype)
@@ -122,6 +138,7 @@ class VectorEnv:
             for i, e in enumerate(self.envs):
                 legal[i] = e.legal_actions()
         to_play = np.array([e.to_play() for e in self.envs], np.int64) if self.spec.players > 1 else None
+        self._legal = legal
         return VecStep(obs, reward, terminated, truncated, final_obs, first, legal, to_play)
 
     def render(self, index: int = 0) -> np.ndarray:

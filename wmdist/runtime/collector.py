@@ -142,6 +142,12 @@ class Collector:
         actions, _ = self.policy.act(obs, np.ones(E, bool), legal, None, False)
         return np.asarray(actions)
 
+    def node_id(self) -> str:
+        """The Ray node this collector runs on (placement tests)."""
+        import ray
+
+        return ray.get_runtime_context().get_node_id()
+
     def ping(self) -> bool:
         return True
 

@@ -84,6 +84,11 @@ class Driver:
         self._rate_base = (time.monotonic(), counters.env_steps, counters.updates)
         self.last_snapshot: dict = {}
 
+    def request_stop(self, reason: str = "stopped on request") -> None:
+        """Ask the loop (possibly running in another thread) to stop at its next turn."""
+        if self.stop_reason is None:
+            self.stop_reason = ("done", reason)
+
     # -- calls ---------------------------------------------------------------------------
     def _issue(self, kind: str, i: int) -> None:
         t = self.topo

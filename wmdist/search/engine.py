@@ -12,6 +12,8 @@ from wmdist.search.noise import considered_visit_table, sample_root_noise
 
 
 def _as_float(x: Any, shape: tuple[int, ...], what: str) -> np.ndarray:
+    if type(x) is np.ndarray and x.dtype == np.float64 and x.shape == shape and x.flags.c_contiguous:
+        return x  # fast path: the common case costs no copy
     arr = np.asarray(x, dtype=np.float64)
     if arr.shape != shape:
         raise ValueError(f"{what} must have shape {shape}, got {arr.shape}")
@@ -93,9 +95,9 @@ def run_search(
     dirichlet, gumbel = sample_root_noise(rng, legal, config.dirichlet_alpha, config.gumbel, add_noise)
 
     nodes_f = np.zeros((batch, num_nodes, 4))
-    nodes_i = np.zeros((batch, num_nodes, 3), dtype=np.int32)
+    nodes_i = np.zeros((batch, num_nodes, 4), dtype=np.int32)
     children = np.full((batch, num_nodes, num_actions), -1, dtype=np.int32)
-    edges_f = np.zeros((batch, num_nodes, 2, num_actions))
+    edges_f = np.zeros((batch, num_nodes, 4, num_actions))
     minmax = np.empty((batch, 2))
     minmax[:, 0], minmax[:, 1] = np.inf, -np.inf
     table = considered_visit_table(config.gumbel_max_considered, sims)

@@ -8,9 +8,12 @@ never share state. Floating-point operations are written in the same order as in
 Array layout (N = num_simulations + 1 nodes, A actions):
     nodes_f  [B, N, 4] float64  VALUE_SUM, REWARD (edge reward into the node), RAW_VALUE
                                 (network value), PREFIX (value prefix, EfficientZero)
-    nodes_i  [B, N, 3] int32    VISITS (incl. own expansion), PARENT, DEPTH
+    nodes_i  [B, N, 4] int32    VISITS (incl. own expansion), PARENT, DEPTH, ACTION (edge from parent)
     children [B, N, A] int32    child node index, -1 if unexpanded
-    edges_f  [B, N, 2, A] float64  PRIOR (pUCT prior, noised at the root), LOGIT
+    edges_f  [B, N, 4, A] float64  PRIOR (pUCT prior, noised at the root), LOGIT, Q (of the
+                                edge, parent's view; valid once visited), N (child visits)
+                                -- Q and N mirror the child's node so selection reads one
+                                contiguous row per node instead of chasing child indices
     legal    [B, A] bool        root legal mask
     gumbel   [B, A] float64     root Gumbel noise (zeros in pUCT mode)
     minmax   [B, 2] float64     running min / max of the Q values in each tree
@@ -26,8 +29,8 @@ import numpy as np
 from numba import njit
 
 VALUE_SUM, REWARD, RAW_VALUE, PREFIX = 0, 1, 2, 3
-VISITS, PARENT, DEPTH = 0, 1, 2
-PRIOR, LOGIT = 0, 1
+VISITS, PARENT, DEPTH, ACTION = 0, 1, 2, 3
+PRIOR, LOGIT, EDGE_Q, EDGE_N = 0, 1, 2, 3
 SEL_PARENT, SEL_ACTION, SEL_RESET = 0, 1, 2
 
 # params vector (floats; flags are 0.0 / 1.0)
@@ -85,7 +88,6 @@ def _puct_select(nodes_f, nodes_i, children, edges_f, legal, minmax, params, b, 
     """argmax_a  Qnorm(s,a) + P(s,a) * sqrt(N(s)) / (1 + N(s,a)) * (c1 + log((N(s) + c2 + 1) / c2))."""
     c1 = params[P_C1]
     c2 = params[P_C2]
-    gamma_sign = params[P_GAMMA_SIGN]
     lo = minmax[b, 0]
     hi = minmax[b, 1]
     parent_n = float(nodes_i[b, node, VISITS])
@@ -94,19 +96,18 @@ def _puct_select(nodes_f, nodes_i, children, edges_f, legal, minmax, params, b, 
         unvisited = _normalize(nodes_f[b, node, VALUE_SUM] / parent_n, lo, hi)
     else:
         unvisited = 0.0
+    prior = edges_f[b, node, PRIOR]
+    edge_q = edges_f[b, node, EDGE_Q]
+    edge_n = edges_f[b, node, EDGE_N]
+    at_root = node == 0
     best = -np.inf
     best_a = -1
-    for a in range(children.shape[2]):
-        if node == 0 and not legal[b, a]:
+    for a in range(prior.shape[0]):
+        if at_root and not legal[b, a]:
             continue
-        child = children[b, node, a]
-        if child < 0:
-            visits = 0.0
-            value_score = unvisited
-        else:
-            visits = float(nodes_i[b, child, VISITS])
-            value_score = _normalize(_child_q(nodes_f, nodes_i, b, child, gamma_sign), lo, hi)
-        score = value_score + edges_f[b, node, PRIOR, a] * pb_c / (1.0 + visits)
+        visits = edge_n[a]
+        value_score = unvisited if visits == 0.0 else _normalize(edge_q[a], lo, hi)
+        score = value_score + prior[a] * pb_c / (1.0 + visits)
         if score > best:
             best = score
             best_a = a
@@ -124,17 +125,17 @@ def _completed_sigma(nodes_f, nodes_i, children, edges_f, legal, params, b, node
     num = children.shape[2]
     use_mask = node == 0
     row_mask = legal[b]
-    gamma_sign = params[P_GAMMA_SIGN]
+    edge_q = edges_f[b, node, EDGE_Q]
+    edge_n = edges_f[b, node, EDGE_N]
     _softmax_into(edges_f[b, node, LOGIT], row_mask, use_mask, probs)
     sum_n = 0.0
     sum_p = 0.0
     sum_pq = 0.0
     max_n = 0.0
     for a in range(num):
-        child = children[b, node, a]
-        if child >= 0:
-            q = _child_q(nodes_f, nodes_i, b, child, gamma_sign)
-            n = float(nodes_i[b, child, VISITS])
+        n = edge_n[a]
+        if n > 0.0:
+            q = edge_q[a]
             sum_n += n
             sum_p += probs[a]
             sum_pq += probs[a] * q
@@ -151,11 +152,7 @@ def _completed_sigma(nodes_f, nodes_i, children, edges_f, legal, params, b, node
         if use_mask and not row_mask[a]:
             raw_q[a] = 0.0
             continue
-        child = children[b, node, a]
-        if child >= 0:
-            raw_q[a] = _child_q(nodes_f, nodes_i, b, child, gamma_sign)
-        else:
-            raw_q[a] = v_mix
+        raw_q[a] = edge_q[a] if edge_n[a] > 0.0 else v_mix
         lo = min(lo, raw_q[a])
         hi = max(hi, raw_q[a])
     scale = (params[P_C_VISIT] + max_n) * params[P_C_SCALE]  # sigma, Gumbel MuZero eq. 8
@@ -182,11 +179,7 @@ def _gumbel_root_select(nodes_f, nodes_i, children, edges_f, legal, gumbel, tabl
     best = -np.inf
     best_a = -1
     for a in range(children.shape[2]):
-        if not legal[b, a]:
-            continue
-        child = children[b, 0, a]
-        visits = 0 if child < 0 else nodes_i[b, child, VISITS]
-        if visits != target:
+        if not legal[b, a] or edges_f[b, 0, EDGE_N, a] != target:
             continue
         score = gumbel[b, a] + edges_f[b, 0, LOGIT, a] + sigma[a]
         if score > best:
@@ -205,17 +198,14 @@ def _gumbel_interior_select(nodes_f, nodes_i, children, edges_f, legal, params, 
     for a in range(num):
         raw_q[a] = edges_f[b, node, LOGIT, a] + sigma[a]  # reuse raw_q as the improved logits
     _softmax_into(raw_q, legal[b], False, improved)
+    edge_n = edges_f[b, node, EDGE_N]
     sum_n = 0.0
     for a in range(num):
-        child = children[b, node, a]
-        if child >= 0:
-            sum_n += nodes_i[b, child, VISITS]
+        sum_n += edge_n[a]
     best = -np.inf
     best_a = -1
     for a in range(num):
-        child = children[b, node, a]
-        visits = 0.0 if child < 0 else float(nodes_i[b, child, VISITS])
-        score = improved[a] - visits / (1.0 + sum_n)
+        score = improved[a] - edge_n[a] / (1.0 + sum_n)
         if score > best:
             best = score
             best_a = a
@@ -241,7 +231,7 @@ def _select_leaf(nodes_f, nodes_i, children, edges_f, legal, gumbel, minmax, tab
 
 
 @njit(cache=True)
-def _backup(nodes_f, nodes_i, minmax, params, b, leaf, value):
+def _backup(nodes_f, nodes_i, edges_f, minmax, params, b, leaf, value):
     """G = v at the leaf; for each node up to the root: add G, then G = r + gamma * sign * G."""
     gamma_sign = params[P_GAMMA_SIGN]
     g = value
@@ -254,8 +244,12 @@ def _backup(nodes_f, nodes_i, minmax, params, b, leaf, value):
         q = _child_q(nodes_f, nodes_i, b, node, gamma_sign)
         minmax[b, 0] = min(minmax[b, 0], q)
         minmax[b, 1] = max(minmax[b, 1], q)
+        parent = nodes_i[b, node, PARENT]
+        action = nodes_i[b, node, ACTION]
+        edges_f[b, parent, EDGE_Q, action] = q
+        edges_f[b, parent, EDGE_N, action] = nodes_i[b, node, VISITS]
         g = nodes_f[b, node, REWARD] + gamma_sign * g
-        node = nodes_i[b, node, PARENT]
+        node = parent
 
 
 @njit(cache=True)
@@ -317,6 +311,7 @@ def expand_backup_select(nodes_f, nodes_i, children, edges_f, legal, gumbel, min
         parent = sel[SEL_PARENT, b]
         children[b, parent, sel[SEL_ACTION, b]] = node
         nodes_i[b, node, PARENT] = parent
+        nodes_i[b, node, ACTION] = sel[SEL_ACTION, b]
         nodes_i[b, node, DEPTH] = nodes_i[b, parent, DEPTH] + 1
         if value_prefix:
             # EfficientZero: the edge reward is the prefix increase, or the prefix itself
@@ -333,7 +328,7 @@ def expand_backup_select(nodes_f, nodes_i, children, edges_f, legal, gumbel, min
             edges_f[b, node, LOGIT, a] = logits[b, a]
         _softmax_into(logits[b], legal[b], False, edges_f[b, node, PRIOR])
         store[b, node, :] = staged[b, :]
-        _backup(nodes_f, nodes_i, minmax, params, b, node, value[b])
+        _backup(nodes_f, nodes_i, edges_f, minmax, params, b, node, value[b])
         if select_next:
             _select_and_gather(nodes_f, nodes_i, children, edges_f, legal, gumbel, minmax, table, params,
                                store, gathered, sel, b, scratch)
@@ -354,8 +349,7 @@ def root_statistics(nodes_f, nodes_i, children, edges_f, legal, gumbel, params,
         root_value[b] = nodes_f[b, 0, VALUE_SUM] / nodes_i[b, 0, VISITS]
         max_n = 0
         for a in range(num_actions):
-            child = children[b, 0, a]
-            visit_counts[b, a] = 0 if child < 0 else nodes_i[b, child, VISITS]
+            visit_counts[b, a] = int(edges_f[b, 0, EDGE_N, a])
             max_n = max(max_n, visit_counts[b, a])
         if params[P_GUMBEL] == 0.0:
             continue

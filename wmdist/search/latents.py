@@ -106,7 +106,13 @@ class LatentStore:
 
     def stage(self, latents: Any) -> None:
         """Copy `latents` (same structure, shapes and kinds as the roots) into the staging row."""
-        leaves, spec = _flatten(latents)
+        if self._spec is None and type(latents) is np.ndarray and not self._slots[0].is_torch:
+            view = self._staged_views[0]  # fast path: one numpy leaf
+            if latents.shape != view.shape:
+                raise ValueError(f"latent shape {latents.shape} differs from the root's {view.shape}")
+            np.copyto(view, latents, casting="same_kind")
+            return
+        leaves, _ = _flatten(latents)
         if len(leaves) != len(self._slots):
             raise ValueError(f"recurrent_fn returned {len(leaves)} latent leaves, expected {len(self._slots)}")
         for leaf, slot, view in zip(leaves, self._slots, self._staged_views):

@@ -1,6 +1,7 @@
 """Root noise (Dirichlet for pUCT, Gumbel for Gumbel MuZero) and the sequential-halving schedule."""
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -11,22 +12,22 @@ def sample_root_noise(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Return (dirichlet [B, A], gumbel [B, A]) float64 drawn in a fixed order.
 
-    Dirichlet: one draw per row over its legal actions (zeros elsewhere); only drawn in
-    pUCT mode with add_noise. Gumbel(0, 1): one [B, A] draw, only in Gumbel mode with
+    Dirichlet(alpha) over each row's legal actions (zeros elsewhere), drawn for the whole
+    batch at once as normalised Gamma(alpha, 1) variables (the Dirichlet's definition); only
+    in pUCT mode with add_noise. Gumbel(0, 1): one [B, A] draw, only in Gumbel mode with
     add_noise. Tests rebuild the same noise from the same seed.
     """
     batch, num_actions = legal.shape
-    dirichlet = np.zeros((batch, num_actions))
-    g = np.zeros((batch, num_actions))
+    zeros = np.zeros((batch, num_actions))
     if not add_noise:
-        return dirichlet, g
+        return zeros, zeros
     if gumbel:
-        g = rng.gumbel(size=(batch, num_actions))
-        return dirichlet, g
-    for b in range(batch):
-        idx = np.flatnonzero(legal[b])
-        dirichlet[b, idx] = rng.dirichlet(np.full(len(idx), alpha))
-    return dirichlet, g
+        return zeros, rng.gumbel(size=(batch, num_actions))
+    gammas = rng.gamma(alpha, size=(batch, num_actions)) * legal
+    total = gammas.sum(axis=1, keepdims=True)
+    # Tiny alpha can underflow every gamma of a row to 0: fall back to uniform there.
+    gammas = np.where(total > 0, gammas, legal.astype(np.float64))
+    return gammas / gammas.sum(axis=1, keepdims=True), zeros
 
 
 def considered_visit_sequence(num_considered: int, num_simulations: int) -> list[int]:
@@ -54,9 +55,11 @@ def considered_visit_sequence(num_considered: int, num_simulations: int) -> list
     return sequence[:num_simulations]
 
 
+@functools.lru_cache(maxsize=64)
 def considered_visit_table(max_considered: int, num_simulations: int) -> np.ndarray:
-    """[max_considered + 1, num_simulations] int32: row m is the schedule for m actions."""
+    """[max_considered + 1, num_simulations] int32: row m is the schedule for m actions (read-only, cached)."""
     table = np.zeros((max_considered + 1, num_simulations), dtype=np.int32)
     for m in range(max_considered + 1):
         table[m] = considered_visit_sequence(m, num_simulations)
+    table.setflags(write=False)
     return table

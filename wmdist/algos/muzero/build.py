@@ -50,4 +50,4 @@ def load_numpy_weights(net: torch.nn.Module, weights: Weights) -> None:
     missing = set(own) - set(weights)
     if missing:
         raise ValueError(f"weight snapshot lacks {len(missing)} tensors, e.g. '{sorted(missing)[0]}'")
-    net.load_state_dict({k: torch.as_tensor(np.asarray(weights[k])) for k in own})
+    net.load_state_dict({k: torch.tensor(np.asarray(weights[k])) for k in own})

@@ -1,0 +1,73 @@
+"""MuZero CartPole self-play speed: env steps/s of the collector's policy (50 simulations,
+E envs searched together in one batched MCTS per step), and where the time goes: the
+network (every initial/recurrent inference), the tree (search minus network) and the envs.
+
+Network: the CartPole preset's MLPs (latent 32, hidden 64, supports 25/5), one torch thread.
+Each case is also run side by side with E=1 so the batching gain is a ratio in the same run.
+"""
+from __future__ import annotations
+
+import time
+from typing import Iterator
+
+import numpy as np
+import torch
+
+from wmdist.algos.muzero import MuZero, MuZeroConfig
+from wmdist.envs.config import EnvConfig
+from wmdist.envs.vector import make_vector_env
+from wmdist.search.api import SearchConfig
+
+
+def _config(simulations: int) -> MuZeroConfig:
+    return MuZeroConfig(search=SearchConfig(num_simulations=simulations), latent_dim=32, hidden=[64],
+                        value_support=25, reward_support=5)
+
+
+def measure(num_envs: int, simulations: int, steps: int, seed: int = 0) -> dict:
+    """Time `steps` vector-env steps of self-play; returns the figures of one case."""
+    env_cfg = EnvConfig(id="gym:CartPole-v1")
+    venv = make_vector_env(env_cfg, num_envs, seed)
+    policy = MuZero(venv.spec, _config(simulations), seed).make_policy()
+    step = venv.reset()
+    policy.act(step.obs, step.first, step.legal, step.to_play, True)  # warm-up (numba JIT, allocations)
+    net = search = env = 0.0
+    start = time.perf_counter()
+    for _ in range(steps):
+        actions, _ = policy.act(step.obs, step.first, step.legal, step.to_play, True)
+        net += policy.last_net_seconds
+        search += policy.last_search_seconds
+        t = time.perf_counter()
+        step = venv.step(actions)
+        env += time.perf_counter() - t
+    total = time.perf_counter() - start
+    venv.close()
+    return {
+        "envs": num_envs, "simulations": simulations, "steps": steps * num_envs,
+        "env_steps_per_s": round(steps * num_envs / total, 1),
+        "searches_per_s": round(steps / total, 2),
+        "simulations_per_s": round(steps * num_envs * simulations / total, 0),
+        "network_share": round(net / total, 3),
+        "tree_share": round((search - net) / total, 3),
+        "env_share": round(env / total, 3),
+        "seconds": round(total, 2),
+    }
+
+
+def run(quick: bool = False) -> Iterator[dict]:
+    torch.set_num_threads(1)
+    steps = 10 if quick else 60
+    base = measure(1, 50, steps * 2)
+    base["speedup_vs_E1"] = 1.0
+    yield base
+    for e in (8, 32):
+        case = measure(e, 50, steps)
+        case["speedup_vs_E1"] = round(case["env_steps_per_s"] / base["env_steps_per_s"], 2)
+        yield case
+
+
+if __name__ == "__main__":  # pragma: no cover
+    import json
+
+    for row in run(quick=True):
+        print(json.dumps(row))
