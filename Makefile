@@ -5,6 +5,8 @@ VENV   ?= .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 CONFIG ?= configs/muzero_cartpole.yaml
+# `make run` is a short demonstration; drop RUN_ARGS for the preset's full budget.
+RUN_ARGS ?= --set run.max_minutes=6
 SYSTEM_PACKAGES := redis-server prometheus libegl1 libegl-mesa0 libgl1-mesa-dri
 export MUJOCO_GL ?= egl
 
@@ -31,7 +33,7 @@ system-deps:
 	fi
 
 run: setup
-	$(BIN)/wmdist train $(CONFIG)
+	$(BIN)/wmdist train $(CONFIG) $(RUN_ARGS)
 
 test: setup system-deps
 	$(BIN)/python -m pytest -q

@@ -55,10 +55,10 @@ def test_two_shards_sample_as_one_buffer(started, backend):
     ids = np.concatenate([_ids(c.sample(500)) for _ in range(8)])
     assert chisquare(np.bincount(ids, minlength=20)).pvalue > 1e-3
     # priorities p_i = i + 1 written back by key: frequencies and IS weights follow the union
-    s = c.sample(100)
     seen = {}
-    for k, st_, i in zip(s.keys, s.stamps, _ids(s)):
-        seen[i] = (k, st_)
+    for _ in range(10):  # collect (key, stamp) of every sequence from what sampling returns
+        s = c.sample(100)
+        seen.update({i: (k, st_) for k, st_, i in zip(s.keys, s.stamps, _ids(s))})
     assert len(seen) == 20
     keys = np.array([seen[i][0] for i in range(20)])
     stamps = np.array([seen[i][1] for i in range(20)])
@@ -106,6 +106,9 @@ def test_close_unblocks_waiters_and_checkpoint_round_trip(started, tmp_path):
     a, b = c.stats(), c2.stats()
     for k in ("size_sequences", "size_steps", "inserts", "shard0_size_sequences", "limiter_size_steps"):
         assert a[k] == b[k], k
+    pickled.close()  # a copy's close stops only that copy
+    assert not pickled.insert(make_batch(1, start=40), source_id=4)
+    assert c.insert(make_batch(1, start=41), source_id=5) and th.is_alive()
     c.close()
     th.join(10)
     assert not th.is_alive() and out == [None]
@@ -158,6 +161,15 @@ def test_private_redis_and_shard_sigkill(started, tmp_path):
         assert after[k] == before[k], k
     ids = np.concatenate([_ids(c.sample(64)) for _ in range(3)])
     assert set(ids) == set(range(12))  # every acknowledged sequence is served again
+    # records broken or lost behind the service's back: redrawn, dropped and counted
+    r = server.client()
+    keys = sorted(k for k in r.scan_iter(match="wmdist:dur:s*:r:*"))
+    r.set(keys[0], b"\x00")
+    r.delete(keys[1])
+    for _ in range(3):
+        x = c.sample(64)
+        assert np.all(x.mask.sum(1) == T) and np.all(x.data["obs"][:, :, 1] == np.arange(T))
+    assert c.stats()["drops_corrupt"] == 2 and c.stats()["size_sequences"] == 10
     d = server.dir
     c.close()
     assert server.proc is None and not any(f.endswith(".pid") for f in os.listdir(d))

@@ -13,7 +13,7 @@ from wmdist.algos.base import FieldSpec
 from wmdist.replay.batch import SequenceBatch
 from wmdist.replay.redis_server import RedisServer
 from wmdist.replay.shard import ReplayShard
-from wmdist.replay.storage_redis import RedisStorage
+from wmdist.replay.storage_redis import RecordsMissing, RedisStorage, encode_rows, new_keys, put_records
 
 
 def _redis_shard(server: RedisServer, ns: str, capacity: int = 16, sampler: str = "prioritized") -> ReplayShard:
@@ -56,20 +56,43 @@ def test_acknowledged_sequences_survive_redis_sigkill(tmp_path):
 
 def test_corrupt_records_are_skipped_and_counted(redis_server, namespace):
     sh = _redis_shard(redis_server, namespace, capacity=8, sampler="uniform")
-    sh.insert(make_batch(6))
+    sh.insert(make_batch(7))
     r = redis_server.client()
-    r.set(f"{namespace}:q:1", b"\x93garbage")
-    raw = r.get(f"{namespace}:q:2")
-    r.set(f"{namespace}:q:2", raw[:-5])  # truncated
-    r.set(f"{namespace}:q:3", raw.replace(b"float32", b"float64", 1))  # dtype no longer matches the bytes
+    key = sh.storage.keys
+    r.set(key[1], b"\x93garbage")
+    raw = r.get(key[2])
+    r.set(key[2], raw[:-5])  # truncated
+    r.set(key[3], raw.replace(b"float32", b"float64", 1))  # dtype no longer matches the bytes
+    r.hset(f"{namespace}:idx", 6, b"\xc1")  # a corrupt index entry
+    r.set(f"{namespace}:r:never-acked", raw)  # written by an insert that never reached the index
     sh2 = _redis_shard(redis_server, namespace, capacity=8, sampler="uniform")
     st = sh2.stats()
-    assert st["drops_corrupt"] == 3 and st["size_sequences"] == 3
+    # slot 6's record lost its index entry, so it is unreferenced like the never-acked one
+    assert st["drops_corrupt"] == 4 and st["drops_unacked"] == 2 and st["size_sequences"] == 3
+    assert r.get(f"{namespace}:r:never-acked") is None and r.get(key[6]) is None
     assert set(sh2.sample(100)["data"]["obs"][:, 0, 0].astype(int)) == {0, 4, 5}
     # corrupted under a running shard: found at sample time, skipped, counted, still serving
-    r.set(f"{namespace}:q:4", b"\x00")
+    r.set(key[4], b"\x00")
     s = sh2.sample(300)
-    assert set(s["data"]["obs"][:, 0, 0].astype(int)) == {0, 5} and sh2.stats()["drops_corrupt"] == 4
+    assert set(s["data"]["obs"][:, 0, 0].astype(int)) == {0, 5} and sh2.stats()["drops_corrupt"] == 5
+    sh2.insert(make_batch(3, start=20))  # the ring goes on: slots 7, 0 (evicts seq 0), 1
+    assert sh2.stats()["size_sequences"] == 4 and sh2.stats()["drops_evicted"] == 1
+
+
+def test_direct_insert_straddling_a_shard_restart_is_refused_not_lost(redis_server, namespace):
+    sh = _redis_shard(redis_server, namespace, capacity=8)
+    b = make_batch(2)
+    keys = new_keys(namespace, 2)
+    put_records(redis_server.client(), dict(zip(keys, encode_rows(b, np.arange(2)))))  # client wrote...
+    restarted = _redis_shard(redis_server, namespace, capacity=8)  # ...the shard restarted...
+    assert restarted.stats()["drops_unacked"] == 2  # ...and removed the unindexed records
+    with pytest.raises(RecordsMissing):  # so indexing them now is refused (the client writes again)
+        restarted.insert_keys(keys, b.version, b.episode_id, b.mask.sum(1), lag_drops=1)
+    assert restarted.stats()["size_sequences"] == 0 and restarted.stats()["drops_policy_lag"] == 0
+    keys = new_keys(namespace, 2)
+    put_records(redis_server.client(), dict(zip(keys, encode_rows(b, np.arange(2)))))
+    assert restarted.insert_keys(keys, b.version, b.episode_id, b.mask.sum(1), lag_drops=1) == 2 * T
+    assert _redis_shard(redis_server, namespace, capacity=8).stats()["size_sequences"] == 2
 
 
 def test_memory_checkpoint_restores_exactly(tmp_path):

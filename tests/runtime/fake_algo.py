@@ -20,6 +20,7 @@ class FakeConfig:
     nan_every: int = param(0, "make every update's loss NaN from update N on (0 = never)", ge=0)
     update_sleep: float = param(0.0, "seconds each update sleeps (a slow learner)", ge=0)
     act_sleep: float = param(0.0, "seconds each act call sleeps (a slow policy)", ge=0)
+    crash_at: int = param(0, "raise an exception in update N (0 = never): a learner failure", ge=0)
 
 
 def _obs_dim(spec) -> int:
@@ -65,6 +66,8 @@ class FakeLearner(Learner):
         pred = (obs @ self.w).mean(-1)  # [B, T]
         per_seq = ((pred - target) ** 2 * mask).sum(1) / mask.sum(1).clamp(min=1)  # [B]
         loss = (per_seq * torch.as_tensor(batch["is_weight"])).mean()
+        if self.cfg.crash_at and self.updates + 1 >= self.cfg.crash_at:
+            raise RuntimeError("simulated learner crash")
         if self.cfg.nan_every and self.updates + 1 >= self.cfg.nan_every:
             loss = loss * float("nan")
         self.step(loss)

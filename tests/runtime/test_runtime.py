@@ -139,7 +139,7 @@ def test_train_ratio_held_within_ten_percent(ray_session, tmp_path):
     try:
         Driver(topo, Counters()).run()
         st = topo.replay.stats()
-        inserted, sampled = st["inserts"], st["samples"]
+        inserted, sampled = st["limiter_inserted"], st["limiter_sampled"]
         assert inserted > 50
         assert abs(sampled / inserted - 2.0) <= 0.2, (sampled, inserted)
     finally:
@@ -194,3 +194,27 @@ def test_config_needing_more_cpus_than_the_cluster_fails_before_any_actor(ray_se
 def test_unknown_algorithm_fails_before_ray(tmp_path):
     with pytest.raises(ConfigError, match="unknown algorithm 'dreamr'"):
         load_config(CFG, ["algo.name=dreamr"])
+
+
+def test_nan_guard_skips_then_stops_with_a_clear_message(ray_session, tmp_path, capsys):
+    from wmdist.runtime.train import train
+
+    cfg = load_config(CFG, [f"run.dir={tmp_path}", "algo.nan_every=5", "learner.max_nan_streak=3",
+                            "actors.num=1"])
+    assert train(cfg=cfg) == 1
+    err = capsys.readouterr().err
+    assert "3 non-finite updates in a row" in err and "--resume" in err
+    run_dir = next(tmp_path.iterdir())
+    ckpt = ck.latest_checkpoint(run_dir)
+    counters = ck.load_counters(ckpt)
+    assert counters["nan_skips"] == 3 and counters["updates"] == 4  # updates 1-4 applied, then 3 skipped
+
+
+def test_learner_failure_stops_the_run_naming_resume(ray_session, tmp_path, capsys):
+    from wmdist.runtime.train import train
+
+    cfg = load_config(CFG, [f"run.dir={tmp_path}", "algo.crash_at=3", "actors.num=1"])
+    assert train(cfg=cfg) == 1
+    err = capsys.readouterr().err
+    assert "learner failed" in err and "simulated learner crash" in err
+    assert "wmdist train --resume" in err

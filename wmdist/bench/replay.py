@@ -4,8 +4,9 @@ Cases: vector observations (T=64, 20 float32) and pixels (T=64, 64x64x3 uint8), 
 shards, memory and redis backends (a private redis-server, appendfsync everysec). Each case
 reports inserts and samples per second and MB/s through the real service (Ray actors,
 limiter off), next to the raw limit for the same bytes: a numpy copy (memory backend) or
-redis-py pipelined SET / GET of one blob per sequence (redis backend), and the memory per
-stored step against the raw bytes per step.
+redis-py pipelined SET / GET of one blob per sequence (redis backend); figures are medians
+over rounds that alternate service and raw calls, so machine load hits both alike. Also the
+memory per stored step against the raw bytes per step.
 """
 from __future__ import annotations
 
@@ -34,50 +35,56 @@ def _batch(fields: dict[str, FieldSpec], n: int, start: int, rng: np.random.Gene
     return SequenceBatch(data, np.ones((n, T), bool), np.zeros(n, np.int64), ids)
 
 
-def _timed(fn, reps: int) -> float:
+def _time(fn) -> float:
     t0 = time.perf_counter()
-    for i in range(reps):
-        fn(i)
+    fn()
     return time.perf_counter() - t0
 
 
-def _raw_numpy(batch: SequenceBatch, reps: int) -> tuple[float, float]:
-    """Seconds per batch for copying the batch's arrays into preallocated rings and back out."""
-    ring = {k: np.empty((len(batch) * 2, *v.shape[1:]), v.dtype) for k, v in batch.data.items()}
-    idx = np.arange(len(batch))
+class _RawNumpy:
+    """The raw limit of the memory backend: copying the same arrays into / out of ring arrays."""
 
-    def put(i):
+    def __init__(self, batch: SequenceBatch, slots: int) -> None:
+        self.ring = {k: np.empty((slots, *v.shape[1:]), v.dtype) for k, v in batch.data.items()}
+        self.ring["mask"] = np.empty((slots, T), bool)
+
+    def put(self, batch: SequenceBatch, i: int) -> None:
+        rows = (np.arange(len(batch)) + i * len(batch)) % len(self.ring["mask"])
         for k, v in batch.data.items():
-            ring[k][idx] = v
+            self.ring[k][rows] = v
+        self.ring["mask"][rows] = batch.mask
 
-    def get(i):
-        for v in ring.values():
-            v[idx]
+    def get(self, n: int, i: int) -> None:
+        rows = (np.arange(n) + i * n) % len(self.ring["mask"])
+        for v in self.ring.values():
+            v[rows]
 
-    return _timed(put, reps) / reps, _timed(get, reps) / reps
 
+class _RawRedis:
+    """The raw limit of the redis backend: pipelined SET / GET of one blob per sequence
+    (the same bytes, fresh keys per round like the service's inserts)."""
 
-def _raw_redis(client, batch: SequenceBatch, reps: int) -> tuple[float, float]:
-    """Seconds per batch for pipelined SET / GET of one blob per sequence (same bytes)."""
-    n = len(batch)
-    blobs = [b"".join(v[i].tobytes() for v in (*batch.data.values(), batch.mask)) for i in range(n)]
-    keys = [f"wmdist:bench:raw:{i}" for i in range(n)]
+    def __init__(self, client) -> None:
+        self.r, self.keys = client, []
 
-    def put(_):
-        p = client.pipeline(transaction=False)
-        for k, b in zip(keys, blobs):
-            p.set(k, b)
+    def put(self, batch: SequenceBatch, i: int) -> None:
+        p = self.r.pipeline(transaction=False)
+        for row in range(len(batch)):
+            blob = b"".join(v[row].tobytes() for v in (*batch.data.values(), batch.mask))
+            key = f"wmdist:bench:raw:{i}:{row}"
+            self.keys.append(key)
+            p.set(key, blob)
         p.execute()
 
-    def get(_):
-        p = client.pipeline(transaction=False)
-        for k in keys:
-            p.get(k)
+    def get(self, n: int, i: int) -> None:
+        p = self.r.pipeline(transaction=False)
+        for j in range(n):
+            p.get(self.keys[(i * n + j) % len(self.keys)])
         p.execute()
 
-    out = _timed(put, reps) / reps, _timed(get, reps) / reps
-    client.delete(*keys)
-    return out
+    def close(self) -> None:
+        for j in range(0, len(self.keys), 1000):
+            self.r.delete(*self.keys[j:j + 1000])
 
 
 def _case(kind: str, shards: int, backend: str, quick: bool, run_dir: str) -> dict:
@@ -86,44 +93,49 @@ def _case(kind: str, shards: int, backend: str, quick: bool, run_dir: str) -> di
     fields = _fields(kind)
     ins_batch = 32 if kind == "vector" else 8  # sequences per insert call
     sample_b = 32 if kind == "vector" else 16
-    reps = (5 if quick else 20) if kind == "vector" else (4 if quick else 12)
-    capacity_seq = ins_batch * reps * 2
+    reps = (6 if quick else 24) if kind == "vector" else (4 if quick else 12)
+    capacity_seq = ins_batch * (reps + 1) * 2
     cfg = ReplayConfig(backend=backend, shards=shards, capacity_steps=capacity_seq * T, seq_len=T,
                        min_size=0, samples_per_insert=0, shard_cpus=0.1)
     rng = np.random.default_rng(0)
-    batches = [_batch(fields, ins_batch, i * ins_batch, rng) for i in range(reps)]
+    batches = [_batch(fields, ins_batch, i * ins_batch, rng) for i in range(reps + 1)]
     seq_bytes = batches[0].nbytes / ins_batch
     client = create_replay(cfg, fields, run_dir, f"bench-{kind}-{shards}-{backend}")
+    raw = None
     try:
         rc = client._server.client() if backend == "redis" else None
         used0 = rc.info("memory")["used_memory"] if rc else 0
-        client.insert(batches[0], source_id=0)  # warm up actors and connections
-        t_ins = _timed(lambda i: client.insert(batches[i], source_id=i), reps)
+        client.insert(batches[-1], source_id=0)  # warm up actors and connections
         client.sample(sample_b)
-        t_smp = _timed(lambda i: client.sample(sample_b), reps)
+        raw = _RawNumpy(batches[0], capacity_seq) if backend == "memory" else _RawRedis(rc)
+        # rounds alternate service and raw calls on the same bytes, so load noise hits both
+        ins, raw_ins = [], []
+        for i in range(reps):
+            ins.append(_time(lambda: client.insert(batches[i], source_id=i)))
+            raw_ins.append(_time(lambda: raw.put(batches[i], i)))
         st = client.stats()
-        raw_step = seq_bytes / T  # fields + 1-byte mask
-        if backend == "memory":  # preallocated rings + index, per step of capacity
-            mem = st["bytes"] / (st["capacity_sequences"] * T)
-        else:  # redis-server's own accounting, per stored step (shard index excluded)
-            mem = (rc.info("memory")["used_memory"] - used0) / (st["size_sequences"] * T)
-        sample_batch = batches[0].select(np.arange(min(sample_b, ins_batch)))
-        if backend == "memory":
-            raw_put, _ = _raw_numpy(batches[0], reps)
-            _, raw_get = _raw_numpy(sample_batch, reps)
-        else:
-            raw_put, _ = _raw_redis(rc, batches[0], reps)
-            _, raw_get = _raw_redis(rc, sample_batch, reps)
-        raw_get *= sample_b / len(sample_batch)
+        mem_raw = rc.info("memory")["used_memory"] - used0 if rc else 0
+        smp, raw_smp = [], []
+        for i in range(reps):
+            smp.append(_time(lambda: client.sample(sample_b)))
+            raw_smp.append(_time(lambda: raw.get(sample_b, i)))
     finally:
+        if isinstance(raw, _RawRedis):
+            raw.close()
         client.close()
-    ins_sps = reps * ins_batch / t_ins
-    smp_sps = reps * sample_b / t_smp
-    raw_ins_sps, raw_smp_sps = ins_batch / raw_put, sample_b / raw_get
+    raw_step = seq_bytes / T  # fields + 1-byte mask
+    if backend == "memory":  # preallocated rings + index, per step of capacity
+        mem = st["bytes"] / (st["capacity_sequences"] * T)
+    else:  # redis-server's own accounting, per stored step (service records + raw blobs so far)
+        stored = st["size_sequences"] + reps * ins_batch
+        mem = mem_raw / (stored * T)
+    med = lambda xs: float(np.median(xs))  # noqa: E731
+    ins_sps, smp_sps = ins_batch / med(ins), sample_b / med(smp)
+    raw_ins_sps, raw_smp_sps = ins_batch / med(raw_ins), sample_b / med(raw_smp)
     mb = seq_bytes / 1e6
     return {
         "bench": "replay", "obs": kind, "shards": shards, "backend": backend, "seq_len": T,
-        "insert_batch": ins_batch, "sample_batch": sample_b, "seq_bytes": int(seq_bytes),
+        "insert_batch": ins_batch, "sample_batch": sample_b, "rounds": reps, "seq_bytes": int(seq_bytes),
         "insert_seq_per_s": round(ins_sps, 1), "insert_mb_per_s": round(ins_sps * mb, 1),
         "sample_seq_per_s": round(smp_sps, 1), "sample_mb_per_s": round(smp_sps * mb, 1),
         "raw": "numpy copy" if backend == "memory" else "redis-py pipelined SET/GET",

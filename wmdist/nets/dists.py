@@ -24,7 +24,9 @@ def twohot_bins(num_bins: int = 255, low: float = -20.0, high: float = 20.0) -> 
     """Evenly spaced bin centres in symlog space (V3: 255 bins on [-20, 20])."""
     if num_bins < 2 or not low < high:
         raise ValueError(f"two-hot needs >= 2 bins and low < high, got {num_bins} on [{low}, {high}]")
-    return torch.linspace(low, high, num_bins)
+    # computed in float64 so the centre bin is exactly 0 for symmetric supports
+    k = torch.arange(num_bins, dtype=torch.float64)
+    return ((low * (num_bins - 1 - k) + high * k) / (num_bins - 1)).float()
 
 
 def twohot_encode(y: torch.Tensor, bins: torch.Tensor) -> torch.Tensor:
@@ -67,6 +69,16 @@ def sample_onehot_index(logp: torch.Tensor, generator: torch.Generator | None = 
     """Sample class indices from log-probabilities [..., C] with the Gumbel-max trick -> [...]."""
     u = torch.rand(logp.shape, generator=generator, device=logp.device).clamp_(1e-20, 1.0)
     return torch.argmax(logp - torch.log(-torch.log(u)), -1)
+
+
+def sample_index_from_probs(probs: torch.Tensor, generator: torch.Generator | None = None) -> torch.Tensor:
+    """Sample class indices from probabilities [..., C] by inverting the CDF -> [...].
+
+    One uniform per variable and no logarithms (cheaper than Gumbel-max for 32x32 latents).
+    """
+    cdf = probs.detach().float().cumsum(-1)
+    u = torch.rand((*probs.shape[:-1], 1), generator=generator, device=probs.device) * cdf[..., -1:]
+    return (cdf < u).sum(-1).clamp_(max=probs.shape[-1] - 1)
 
 
 def straight_through_onehot(index: torch.Tensor, probs: torch.Tensor) -> torch.Tensor:

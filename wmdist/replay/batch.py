@@ -82,8 +82,8 @@ def check_field(name: str, arr: object, spec: FieldSpec, lead: tuple[int, ...]) 
 KEY_SHIFT = 40  # keys = shard << KEY_SHIFT | slot
 
 
-def make_keys(shard: int, slots: np.ndarray) -> np.ndarray:
-    return (np.int64(shard) << KEY_SHIFT) | np.asarray(slots, dtype=np.int64)
+def make_keys(shard: int | np.ndarray, slots: np.ndarray) -> np.ndarray:
+    return (np.asarray(shard, dtype=np.int64) << KEY_SHIFT) | np.asarray(slots, dtype=np.int64)
 
 
 def split_keys(keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -8,24 +8,32 @@ from wmdist.config.fields import param
 
 @dataclass
 class ReplayConfig:
-    backend: str = param("memory", "where sequences are stored: in the shard processes or in redis-server", choices=("memory", "redis"))
+    backend: str = param(
+        "memory", "where sequences are stored: in the shard processes or in redis-server", choices=("memory", "redis"))
     shards: int = param(1, "number of replay shard actors (episodes are hashed onto them)", ge=1, le=256)
-    capacity_steps: int = param(1_000_000, "total stored steps over all shards (T per sequence slot); FIFO eviction", ge=1)
+    capacity_steps: int = param(
+        1_000_000, "total stored steps over all shards (T per sequence slot); FIFO eviction", ge=1)
     capacity_bytes: int = param(0, "optional cap on stored array bytes over all shards (0 = none)", ge=0)
     seq_len: int = param(64, "steps T of one stored sequence", ge=1)
     overlap: int = param(0, "steps shared by consecutive windows of one episode (0..T-1)", ge=0)
     sampler: str = param("uniform", "how sequences are drawn", choices=("uniform", "prioritized"))
     priority_alpha: float = param(0.6, "priority exponent alpha: P(i) = p_i^alpha / sum p^alpha", ge=0)
     priority_beta: float = param(0.4, "importance-weight exponent beta: w_i = (N P(i))^-beta", ge=0, le=1)
-    samples_per_insert: float = param(0.0, "sampled sequences per inserted sequence (train ratio); 0 = no limiting", ge=0)
+    samples_per_insert: float = param(
+        0.0, "sampled sequences per inserted sequence (train ratio); 0 = no limiting", ge=0)
     min_size: int = param(1000, "stored steps (real, over all shards) before sampling starts", ge=0)
-    error_buffer: float = param(1000.0, "slack of the rate limiter, in sampled sequences, around the target ratio", ge=0)
-    redis_url: str = param("", "redis://host:port/db of an external server ('' = a private redis-server in the run dir)")
-    redis_password_file: str = param("", "file holding the password of the external redis server ('' = none or in the URL)")
-    redis_appendfsync: str = param("everysec", "private redis-server AOF fsync policy", choices=("always", "everysec", "no"))
+    error_buffer: float = param(
+        1000.0, "slack of the rate limiter, in sampled sequences, around the target ratio", ge=0)
+    redis_url: str = param(
+        "", "redis://host:port/db of an external server ('' = a private redis-server in the run dir)")
+    redis_password_file: str = param(
+        "", "file holding the password of the external redis server ('' = none or in the URL)")
+    redis_appendfsync: str = param(
+        "everysec", "private redis-server AOF fsync policy", choices=("always", "everysec", "no"))
     redis_aof: bool = param(True, "private redis-server keeps an append-only file (durable across restarts)")
     shard_cpus: float = param(0.1, "Ray CPU share of each shard actor", gt=0)
-    max_policy_lag: int = param(0, "drop inserted sequences older than this many policy versions (0 = off)", ge=0)
+    max_policy_lag: int = param(
+        0, "drop inserted sequences older than this many policy versions (0 = off)", ge=0)
     seed: int = param(0, "seed of the samplers (shard i uses seed + i)", ge=0)
 
     def validate(self) -> None:

@@ -20,7 +20,9 @@ from wmdist.replay.batch import SequenceBatch, check_field
 from wmdist.replay.storage_memory import MemoryStorage
 from wmdist.replay.sumtree import SumTree
 
-DROP_REASONS = ("stale_writeback", "stale_priority", "evicted", "corrupt", "policy_lag")
+# why a sequence or a write-back was not kept (`unacked`: records found in redis at restart
+# whose insert was never acknowledged)
+DROP_REASONS = ("stale_writeback", "stale_priority", "evicted", "corrupt", "policy_lag", "unacked")
 
 
 class ReplayShard:
@@ -57,17 +59,20 @@ class ReplayShard:
     def reload(self) -> None:
         """Rebuild index and priorities from durable storage (after a restart)."""
         with self.lock:
-            idx, count, corrupt = self.storage.load()
+            idx, count, drops = self.storage.load()
             for k in ("stamp", "version", "episode", "steps", "priority"):
                 getattr(self, k)[:] = idx[k]
             live = self.stamp >= 0
-            self.priority[live & (self.priority <= 0)] = 1.0 if not self.prioritized else self.priority[live].max(initial=1.0)
+            known = live & np.isfinite(self.priority)
+            self.max_priority = float(self.priority[known].max(initial=1.0))
+            self.priority[live & ~known] = self.max_priority  # no stored priority: treat as new
+            self.priority[~live] = 0.0
             self.count = count
-            self.max_priority = float(self.priority[live].max(initial=1.0))
             self.tree = SumTree(self.capacity)
             slots = np.flatnonzero(live)
             self.tree.set(slots, self._mass(self.priority[slots]))
-            self.counters["drops_corrupt"] += corrupt
+            for reason, n in drops.items():
+                self.counters[f"drops_{reason}"] += n
 
     @property
     def size_sequences(self) -> int:
@@ -88,27 +93,57 @@ class ReplayShard:
                 if not keep.all():
                     batch = batch.select(np.flatnonzero(keep))
             n = len(batch)
-            if n == 0:
-                return 0
             if n > self.capacity:  # only the newest `capacity` would survive anyway
-                self.counters["drops_evicted"] += n - self.capacity
+                self._skip(n - self.capacity)
                 batch = batch.select(np.arange(n - self.capacity, n))
-                self.count += n - self.capacity
-                n = self.capacity
-            ids = self.count + np.arange(n, dtype=np.int64)
-            slots = ids % self.capacity
-            self.counters["drops_evicted"] += int((self.stamp[slots] >= 0).sum())
             steps = batch.mask.sum(axis=1).astype(np.int64)
-            prio = np.full(n, self.max_priority)  # new items at the current max priority
-            meta = {"stamp": ids, "version": batch.version, "episode": batch.episode_id, "steps": steps,
-                    "priority": prio}
-            self.storage.write(slots, batch, meta)  # durable before the index sees it
-            self.stamp[slots], self.version[slots] = ids, batch.version
-            self.episode[slots], self.steps[slots], self.priority[slots] = batch.episode_id, steps, prio
-            self.tree.set(slots, self._mass(prio))
-            self.count += n
-            self.counters["inserts"] += n
-            return int(steps.sum())
+            return self._place(batch.version, batch.episode_id, steps,
+                               lambda slots, meta: self.storage.write(slots, batch, meta))
+
+    def insert_keys(self, keys: list[str], version: np.ndarray, episode: np.ndarray, steps: np.ndarray,
+                    lag_drops: int = 0) -> int:
+        """Index records a client already wrote to durable storage (redis direct path)."""
+        if not self.storage.durable:
+            raise ValueError("insert_keys needs a durable (redis) storage")
+        if not (len(keys) == len(version) == len(episode) == len(steps)):
+            raise ValueError("insert_keys: keys, version, episode and steps must have the same length")
+        steps = np.asarray(steps, np.int64)
+        if steps.size and (steps.min() < 1 or steps.max() > self.T):
+            raise ValueError(f"insert_keys: steps must be in [1, {self.T}]")
+        with self.lock:
+            n = len(keys)
+            if n > self.capacity:
+                self.storage.discard_keys(list(keys[:n - self.capacity]))
+                self._skip(n - self.capacity)
+                keys, version, episode, steps = (x[n - self.capacity:] for x in (keys, version, episode, steps))
+            stored = self._place(np.asarray(version, np.int64), np.asarray(episode, np.int64), steps,
+                                 lambda slots, meta: self.storage.register(slots, list(keys), meta))
+            self.counters["drops_policy_lag"] += int(lag_drops)  # counted once the insert succeeded
+            return stored
+
+    def _skip(self, n: int) -> None:
+        """n windows of one call that would be evicted by the same call."""
+        self.counters["drops_evicted"] += n
+        self.counters["inserts"] += n
+        self.count += n
+
+    def _place(self, version: np.ndarray, episode: np.ndarray, steps: np.ndarray, write) -> int:
+        n = len(steps)
+        if n == 0:
+            return 0
+        ids = self.count + np.arange(n, dtype=np.int64)  # write ids = stamps
+        slots = ids % self.capacity  # FIFO ring: the oldest sequence is evicted first
+        evicted = int((self.stamp[slots] >= 0).sum())
+        prio = np.full(n, self.max_priority)  # new items at the current max priority
+        meta = {"stamp": ids, "version": version, "episode": episode, "steps": steps, "priority": prio}
+        write(slots, meta)  # durable before the index sees it (raises: nothing changed)
+        self.counters["drops_evicted"] += evicted
+        self.stamp[slots], self.version[slots], self.episode[slots] = ids, version, episode
+        self.steps[slots], self.priority[slots] = steps, prio
+        self.tree.set(slots, self._mass(prio))
+        self.count += n
+        self.counters["inserts"] += n
+        return int(steps.sum())
 
     # -- sample -------------------------------------------------------------------------
     def mass(self) -> tuple[int, float, int]:
@@ -116,34 +151,39 @@ class ReplayShard:
         with self.lock:
             return self.size_sequences, self.tree.total, self.size_steps
 
-    def sample(self, k: int, beta: float = 0.0, global_count: int = 0, global_mass: float = 0.0) -> dict:
+    def sample(self, k: int, beta: float = 0.0, global_count: int = 0, global_mass: float = 0.0,
+               fetch: bool = True) -> dict:
         """k draws; `is_weight` = (N P(i))^-beta with the union's N and mass (not normalised).
 
-        Returns {"data", "mask" [k, T] bool, "is_weight" [k], "slots" [k], "stamps" [k]}.
+        Returns {"slots" [k], "stamps" [k], "is_weight" [k]} plus, with `fetch`, "data" and
+        "mask" [k, T] bool, or without it (durable storage) the record "keys" for the caller
+        to fetch itself.
         """
         if k < 0:
             raise ValueError(f"sample size must be >= 0, got {k}")
         with self.lock:
-            out_data = {f: np.zeros((k, self.T, *s.shape), dtype=s.dtype) for f, s in self.fields.items()}
-            out_mask = np.zeros((k, self.T), dtype=bool)
-            slots = np.zeros(k, np.int64)
-            todo = np.arange(k)
-            while todo.size:
-                if self.tree.total <= 0:
-                    raise ValueError(f"replay shard {self.shard_id} is empty")
-                s = self.tree.sample(todo.size, self.rng)
-                data, mask, bad = self.storage.read(s)
-                good = np.setdiff1d(np.arange(todo.size), bad)
-                for f in out_data:
-                    out_data[f][todo[good]] = data[f][good]
-                out_mask[todo[good]] = mask[good]
-                slots[todo[good]] = s[good]
-                if bad.size:  # corrupt in storage: forget the slot, count it, draw again
-                    dead = np.unique(s[bad])
-                    self.counters["drops_corrupt"] += dead.size
-                    self.stamp[dead] = -1
-                    self.tree.set(dead, np.zeros(dead.size))
-                todo = todo[bad]
+            if self.tree.total <= 0:
+                raise ValueError(f"replay shard {self.shard_id} is empty")
+            slots = self.tree.sample(k, self.rng)
+            out: dict = {}
+            if fetch:
+                out["data"] = {f: np.zeros((k, self.T, *s.shape), dtype=s.dtype) for f, s in self.fields.items()}
+                out["mask"] = np.zeros((k, self.T), dtype=bool)
+                todo = np.arange(k)
+                while todo.size:
+                    data, mask, bad = self.storage.read(slots[todo])
+                    good = np.setdiff1d(np.arange(todo.size), bad)
+                    for f in out["data"]:
+                        out["data"][f][todo[good]] = data[f][good]
+                    out["mask"][todo[good]] = mask[good]
+                    if bad.size:  # unreadable in storage: forget the slot, count it, draw again
+                        self._drop(np.unique(slots[todo[bad]]))
+                        if self.tree.total <= 0:
+                            raise ValueError(f"replay shard {self.shard_id} is empty")
+                        slots[todo[bad]] = self.tree.sample(bad.size, self.rng)
+                    todo = todo[bad]
+            else:
+                out["keys"] = self.storage.key_of(slots)
             if self.prioritized and beta > 0:
                 n = global_count or self.size_sequences
                 total = global_mass or self.tree.total
@@ -152,8 +192,24 @@ class ReplayShard:
             else:
                 w = np.ones(k)
             self.counters["samples"] += k
-            return {"data": out_data, "mask": out_mask, "is_weight": w.astype(np.float32),
-                    "slots": slots, "stamps": self.stamp[slots].copy()}
+            out.update(is_weight=w.astype(np.float32), slots=slots, stamps=self.stamp[slots].copy())
+            return out
+
+    def _drop(self, slots: np.ndarray) -> None:
+        self.counters["drops_corrupt"] += slots.size
+        self.stamp[slots] = -1
+        self.tree.set(slots, np.zeros(slots.size))
+        self.storage.drop(slots)
+
+    def drop_corrupt(self, slots: np.ndarray, stamps: np.ndarray) -> int:
+        """A reader found these records undecodable: forget them (if unchanged since drawn)."""
+        with self.lock:
+            slots = np.asarray(slots, np.int64)
+            ok = (self.stamp[slots] == np.asarray(stamps, np.int64)) & (self.stamp[slots] >= 0)
+            dead = np.unique(slots[ok])
+            if dead.size:
+                self._drop(dead)
+            return int(dead.size)
 
     # -- write-back ---------------------------------------------------------------------
     def _fresh(self, slots: np.ndarray, stamps: np.ndarray, reason: str) -> np.ndarray:

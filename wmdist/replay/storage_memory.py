@@ -39,6 +39,9 @@ class MemoryStorage:
         for k, v in fields.items():
             self.data[k][slots] = v
 
+    def drop(self, slots: np.ndarray) -> None:
+        pass  # rows in memory never go bad
+
     def write_priorities(self, slots: np.ndarray, priorities: np.ndarray) -> None:
         pass  # the shard's sum tree is the only copy; it goes into checkpoints
 

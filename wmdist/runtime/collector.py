@@ -153,11 +153,15 @@ class Collector:
 
 
 def _incarnation() -> int:
-    """How many times Ray has restarted this actor (0 outside Ray)."""
+    """1 for an actor's first life; a fresh number after Ray restarted it (new random stream)."""
     try:
+        import warnings
+
         import ray
 
-        ctx = ray.get_runtime_context()
-        return 1 + int(bool(ctx.was_current_actor_reconstructed)) * int(time.time() * 1000) % 1_000_000
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            restarted = bool(ray.get_runtime_context().was_current_actor_reconstructed)
     except Exception:  # noqa: BLE001 - not inside a Ray actor
         return 1
+    return 2 + int(time.time() * 1000) % 1_000_000 if restarted else 1

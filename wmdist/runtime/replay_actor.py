@@ -3,6 +3,8 @@
 `ShardActor` holds one `ReplayShard` (threaded: a blocking call never stalls the others);
 with the redis backend it rebuilds its index from redis in `__init__`, so a Ray restart
 (`max_restarts`) after the process died brings back every acknowledged sequence.
+With redis the shard only indexes: clients write and read the record bytes themselves
+(`insert_keys`, `sample(fetch=False)`).
 `LimiterActor` holds the one `RateLimiter` of the run (shared by all shards) and the
 learner's current policy version (for `max_policy_lag`).
 """
@@ -37,11 +39,18 @@ class ShardActor:
     def insert(self, batch: SequenceBatch, min_version: int | None) -> int:
         return self.shard.insert(batch, min_version)
 
+    def insert_keys(self, keys: list[str], version: np.ndarray, episode: np.ndarray, steps: np.ndarray,
+                    lag_drops: int) -> int:
+        return self.shard.insert_keys(keys, version, episode, steps, lag_drops)
+
+    def drop_corrupt(self, slots: np.ndarray, stamps: np.ndarray) -> int:
+        return self.shard.drop_corrupt(slots, stamps)
+
     def mass(self) -> tuple[int, float, int]:
         return self.shard.mass()
 
-    def sample(self, k: int, beta: float, global_count: int, global_mass: float) -> dict:
-        return self.shard.sample(k, beta, global_count, global_mass)
+    def sample(self, k: int, beta: float, global_count: int, global_mass: float, fetch: bool = True) -> dict:
+        return self.shard.sample(k, beta, global_count, global_mass, fetch)
 
     def update_priorities(self, slots: np.ndarray, stamps: np.ndarray, priorities: np.ndarray) -> int:
         return self.shard.update_priorities(slots, stamps, priorities)

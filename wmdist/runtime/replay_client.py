@@ -4,11 +4,17 @@ A small picklable object with the shard and limiter actor handles. Only the proc
 called `create_replay` owns the service (its `close()` stops the actors and the private
 redis-server); a pickled copy's `close()` only stops that copy.
 
+With `backend: redis` every process holding a client reads and writes record bytes in
+redis itself (see `wmdist/replay/__init__.py`), so it must reach the server: the private
+server (no `redis_url`) binds 127.0.0.1 and suits single-node runs; a multi-node run names a
+reachable server in `replay.redis_url` with `replay.redis_password_file` on every node.
+
 Stats keys (`stats()`), all floats:
   `size_steps`, `size_sequences`, `capacity_sequences`, `inserts`, `samples`, `bytes` (memory
   backend: ring arrays + index; redis: index only) -- summed over shards;
+  (`samples` includes unlimited reanalyzer draws; the limiter's own counts do not);
   `drops_<reason>` summed, reason in stale_writeback, stale_priority, evicted, corrupt,
-  policy_lag; the same keys per shard as `shard<i>_<key>`;
+  policy_lag, unacked; the same keys per shard as `shard<i>_<key>`;
   limiter: `insert_wait_seconds`, `sample_wait_seconds`, `limiter_error` (S - I*spi),
   `limiter_inserted`, `limiter_sampled`, `limiter_size_steps` (steps ever stored),
   `policy_version`.
@@ -20,12 +26,14 @@ import os
 
 import numpy as np
 import ray
-from ray.exceptions import RayActorError
+from ray.exceptions import RayActorError, RayTaskError
 
 from wmdist.algos.base import FieldSpec
 from wmdist.replay.batch import Sample, SequenceBatch, make_keys, split_keys
 from wmdist.replay.config import ReplayConfig
 from wmdist.replay.shard import DROP_REASONS
+from wmdist.replay.storage_redis import (RecordsMissing, connect, encode_rows, fetch_records, new_keys,
+                                         put_records)
 from wmdist.runtime.replay_actor import LimiterActor, ShardActor
 
 
@@ -39,18 +47,34 @@ def route(source_id: int, episode_id: np.ndarray, shards: int) -> np.ndarray:
 
 
 class ReplayClient:
-    def __init__(self, cfg: ReplayConfig, fields: dict[str, FieldSpec], shards: list, limiter, server=None) -> None:
+    def __init__(self, cfg: ReplayConfig, fields: dict[str, FieldSpec], shards: list, limiter, server=None,
+                 redis_url: str = "", password_file: str = "", namespaces: list[str] | None = None) -> None:
         self.cfg, self.fields = cfg, dict(fields)
         self.shards, self.limiter = list(shards), limiter
         self._server = server  # private redis-server (owner only)
+        self._redis_url, self._password_file = redis_url, password_file
+        self._namespaces = list(namespaces or [])  # per shard (redis backend)
+        self._redis = None  # connection, opened lazily in each process
         self._owner = True
         self._closed = False
         self._rng: np.random.Generator | None = None
+        self._warm = False  # this copy saw min_size reached with the ratio off
 
     def __getstate__(self) -> dict:
         state = dict(self.__dict__)
-        state.update(_server=None, _owner=False, _rng=None)
+        state.update(_server=None, _owner=False, _rng=None, _redis=None, _warm=False)
         return state
+
+    @property
+    def direct(self) -> bool:
+        """Redis backend: this client moves record bytes to and from redis itself."""
+        return self.cfg.backend == "redis"
+
+    @property
+    def redis(self):
+        if self._redis is None:
+            self._redis = connect(self._redis_url, self._password_file)
+        return self._redis
 
     @property
     def rng(self) -> np.random.Generator:
@@ -67,20 +91,60 @@ class ReplayClient:
         n = len(batch)
         if n == 0:
             return True
+        lag = self.cfg.max_policy_lag
         try:
-            ok, version = ray.get(self.limiter.acquire_insert.remote(n, timeout))
+            if self.cfg.samples_per_insert == 0 and lag == 0:  # never waits: count it without a round trip
+                self.limiter.acquire_insert.remote(n, 0)
+                ok, version = True, -1
+            else:
+                ok, version = ray.get(self.limiter.acquire_insert.remote(n, timeout))
         except RayActorError:
             return False  # the service was shut down
         if not ok:
             return False
-        lag = self.cfg.max_policy_lag
         min_version = version - lag if lag > 0 and version >= 0 else None
         dest = route(source_id, batch.episode_id, len(self.shards))
-        refs = [self.shards[s].insert.remote(batch.select(np.flatnonzero(dest == s)), min_version)
-                for s in np.unique(dest)]  # one batched call per shard
-        steps = sum(ray.get(refs))
+        if self.direct:
+            steps = self._insert_direct(batch, dest, min_version)
+        else:  # one batched call per shard; Ray carries the arrays
+            targets = np.unique(dest)
+            steps = sum(ray.get([self.shards[s].insert.remote(
+                batch if targets.size == 1 else batch.select(np.flatnonzero(dest == s)), min_version)
+                for s in targets]))
         self.limiter.commit_insert.remote(steps)
         return True
+
+    def _insert_direct(self, batch: SequenceBatch, dest: np.ndarray, min_version: int | None) -> int:
+        """Records go to redis in one pipeline, then each shard indexes its keys (one small
+        call). A shard that restarted in between has removed the records as unacknowledged
+        and refuses them: they are written again for that shard only."""
+        keep = np.ones(len(batch), bool) if min_version is None else batch.version >= min_version
+        steps = batch.mask.sum(axis=1).astype(np.int64)
+        plan = {int(s): (np.flatnonzero((dest == s) & keep), int(((dest == s) & ~keep).sum()))
+                for s in np.unique(dest)}
+        todo, stored = list(plan), 0
+        for attempt in range(3):
+            records, refs = {}, {}
+            for s in todo:
+                rows, lag = plan[s]
+                keys = new_keys(self._namespaces[s], rows.size)
+                records.update(zip(keys, encode_rows(batch, rows)))
+                refs[s] = (keys, rows, lag)
+            put_records(self.redis, records)
+            refs = {s: self.shards[s].insert_keys.remote(keys, batch.version[rows], batch.episode_id[rows],
+                                                         steps[rows], lag)
+                    for s, (keys, rows, lag) in refs.items()}
+            todo = []
+            for s, ref in refs.items():
+                try:
+                    stored += ray.get(ref)
+                except RayTaskError as e:
+                    if attempt == 2 or not isinstance(e.cause, RecordsMissing):
+                        raise
+                    todo.append(s)
+            if not todo:
+                break
+        return stored
 
     # -- sample -------------------------------------------------------------------------
     def sample(self, batch_size: int, timeout: float | None = None, limited: bool = True) -> Sample | None:
@@ -93,12 +157,22 @@ class ReplayClient:
         if self._closed:
             return None
         try:
-            if limited and not ray.get(self.limiter.acquire_sample.remote(batch_size, timeout)):
-                return None
+            if limited and self._warm:  # ratio off and min_size reached (it stays reached): just count
+                self.limiter.acquire_sample.remote(batch_size, 0)
+            elif limited:
+                if not ray.get(self.limiter.acquire_sample.remote(batch_size, timeout)):
+                    return None
+                self._warm = self.cfg.samples_per_insert == 0
             if not limited and sum(m[0] for m in ray.get([s.mass.remote() for s in self.shards])) == 0:
                 return None
         except RayActorError:
             return None
+        try:
+            return self._sample(batch_size)
+        except RayActorError:
+            return None  # the service was shut down
+
+    def _sample(self, batch_size: int) -> Sample:
         S = len(self.shards)
         if S == 1:
             counts, n, mass = np.array([batch_size]), 0, 0.0
@@ -110,18 +184,49 @@ class ReplayClient:
                 raise ValueError("replay is empty (min_size 0 and nothing inserted)")
             counts = self.rng.multinomial(batch_size, np.array([m[1] for m in masses]) / mass)
         beta = self.cfg.priority_beta if self.cfg.sampler == "prioritized" else 0.0
-        parts = [(i, self.shards[i].sample.remote(int(k), beta, n, mass)) for i, k in enumerate(counts) if k > 0]
+        fetch = not self.direct
+        parts = [(i, self.shards[i].sample.remote(int(k), beta, n, mass, fetch)) for i, k in enumerate(counts) if k > 0]
         got = ray.get([r for _, r in parts])
-        data = {f: np.concatenate([g["data"][f] for g in got]) for f in self.fields}
         w = np.concatenate([g["is_weight"] for g in got])
-        keys = np.concatenate([make_keys(i, g["slots"]) for (i, _), g in zip(parts, got)])
+        shard_of = np.concatenate([np.full(len(g["slots"]), i) for (i, _), g in zip(parts, got)])
+        slots = np.concatenate([g["slots"] for g in got])
+        stamps = np.concatenate([g["stamps"] for g in got])
+        if fetch:
+            data = {f: np.concatenate([g["data"][f] for g in got]) for f in self.fields}
+            mask = np.concatenate([g["mask"] for g in got])
+        else:
+            keys = [k for g in got for k in g["keys"]]
+            data, mask = self._fetch_direct(keys, shard_of, slots, stamps, w, beta, n, mass)
         return Sample(
             data=data,
-            mask=np.concatenate([g["mask"] for g in got]).astype(np.float32),
+            mask=mask.astype(np.float32),
             is_weight=(w / w.max()).astype(np.float32),  # normalised by the batch max (Schaul et al. 2016)
-            keys=keys,
-            stamps=np.concatenate([g["stamps"] for g in got]),
+            keys=make_keys(shard_of, slots),
+            stamps=stamps,
         )
+
+    def _fetch_direct(self, keys, shard_of, slots, stamps, w, beta, n, mass):
+        """One MGET of the drawn records. Rows whose record is gone or undecodable are reported
+        to their shard (which drops and counts them unless the slot was rewritten since the
+        draw, i.e. evicted) and drawn again from the same shard."""
+        data, mask, missing, corrupt = fetch_records(self.redis, keys, self.fields, self.cfg.seq_len)
+        redo = np.union1d(missing, corrupt)
+        for _ in range(100):
+            if redo.size == 0:
+                return data, mask
+            by_shard = [(s, redo[shard_of[redo] == s]) for s in np.unique(shard_of[redo])]
+            ray.get([self.shards[s].drop_corrupt.remote(slots[rows], stamps[rows]) for s, rows in by_shard])
+            again = []
+            for s, rows in by_shard:
+                g = ray.get(self.shards[s].sample.remote(rows.size, beta, n, mass, False))
+                d2, m2, miss2, corr2 = fetch_records(self.redis, g["keys"], self.fields, self.cfg.seq_len)
+                for f in self.fields:
+                    data[f][rows] = d2[f]
+                mask[rows] = m2
+                slots[rows], stamps[rows], w[rows] = g["slots"], g["stamps"], g["is_weight"]
+                again.append(rows[np.union1d(miss2, corr2)])
+            redo = np.concatenate(again)
+        raise RuntimeError("replay: could not read a batch from redis after 100 redraws")
 
     # -- write-back ---------------------------------------------------------------------
     def _by_shard(self, keys: np.ndarray, stamps: np.ndarray):
@@ -189,16 +294,19 @@ class ReplayClient:
         ray.get(self.limiter.load_state_dict.remote(state))
 
     def close(self) -> None:
-        """Wake every waiter (they return False/None); the owner also stops actors and redis."""
+        """Owner: wake every waiter of the service (they return False/None), then stop the
+        actors and the private redis-server. A pickled copy only stops using the service."""
         if self._closed:
             return
         self._closed = True
+        if self._redis is not None:
+            self._redis.close()
+        if not self._owner:
+            return
         try:
             ray.get(self.limiter.close.remote(), timeout=30)
         except Exception:  # already gone: nothing left to wake
             pass
-        if not self._owner:
-            return
         try:
             ray.get([s.close.remote() for s in self.shards], timeout=30)
         except Exception:
@@ -238,10 +346,11 @@ def create_replay(cfg: ReplayConfig, fields: dict[str, FieldSpec], run_dir: str,
 
             server = RedisServer(os.path.join(run_dir, "redis"), cfg.redis_appendfsync, cfg.redis_aof).start()
             url, pwfile = server.url, server.password_file
+    namespaces = [f"wmdist:{run_name}:s{i}" for i in range(cfg.shards)]
     shard_cls = ray.remote(ShardActor).options(num_cpus=cfg.shard_cpus, max_concurrency=8, max_restarts=-1,
                                                max_task_retries=3)
     shards = [shard_cls.remote(fields, cfg.seq_len, cap, cfg.sampler, cfg.priority_alpha, i, cfg.seed + i,
-                               cfg.backend, url, pwfile, f"wmdist:{run_name}:s{i}") for i in range(cfg.shards)]
+                               cfg.backend, url, pwfile, namespaces[i]) for i in range(cfg.shards)]
     limiter = ray.remote(LimiterActor).options(num_cpus=0, max_concurrency=64).remote(
         cfg.samples_per_insert, cfg.min_size, cfg.error_buffer)
     try:
@@ -251,4 +360,4 @@ def create_replay(cfg: ReplayConfig, fields: dict[str, FieldSpec], run_dir: str,
             server.stop()
         raise
     ray.get(limiter.set_size.remote(sum(m[2] for m in sizes)))
-    return ReplayClient(cfg, fields, shards, limiter, server)
+    return ReplayClient(cfg, fields, shards, limiter, server, url, pwfile, namespaces)

@@ -36,8 +36,9 @@ def publish(hub, snap: dict) -> None:
             s("wmdist_actor_restarts_total", snap["restarts"].get(role, 0), role=role)
     replay = snap.get("replay") or {}
     s("wmdist_policy_lag_drops_total", replay.get("drops_policy_lag", 0))
-    # measured train ratio: sampled sequences per inserted sequence (replay.samples_per_insert)
-    s("wmdist_train_ratio", replay.get("samples", 0) / max(replay.get("inserts", 0), 1))
+    # measured train ratio: learner-sampled sequences per inserted sequence (replay.samples_per_insert);
+    # the limiter's counts leave out the reanalyzers' unlimited draws
+    s("wmdist_train_ratio", replay.get("limiter_sampled", 0) / max(replay.get("limiter_inserted", 0), 1))
     for key, value in replay.items():
         m = _SHARD_KEY.match(key)
         if not m:

@@ -33,6 +33,7 @@ def start_ray(cfg: RunConfig) -> None:
         ray.init(address=cfg.ray.address, log_to_driver=True, configure_logging=False)
         return
     kwargs: dict[str, Any] = {
+        "address": "local",  # a fresh embedded instance, never someone else's running cluster
         "num_cpus": cfg.ray.num_cpus or os.cpu_count() or 1,
         "include_dashboard": False,
         "object_store_memory": cfg.ray.object_store_mb * 1024 * 1024,

@@ -25,6 +25,16 @@ Latents are a numpy array, a CPU torch tensor, or a tuple/list (nested) of them,
 leading dim B. The latents handed to `recurrent_fn` are views into the engine's buffer:
 valid during that call only (copy them if you keep them). reward/value/logits come back as
 numpy arrays (any float dtype).
+
+Example (a torch MuZero network on the CPU):
+
+    def recurrent_fn(latents, actions):           # latents [B, ...] torch, actions [B] int64 numpy
+        with torch.no_grad():
+            reward, value, logits, nxt = net.recurrent(latents, torch.from_numpy(actions))
+        return reward.numpy(), value.numpy(), logits.numpy(), nxt
+    out = search(root_latent, root_logits, root_value, legal, to_play, recurrent_fn,
+                 SearchConfig(num_simulations=50), rng, temperature=1.0)
+    out.action, out.policy, out.root_value          # [B], [B, A], [B]
 """
 from __future__ import annotations
 

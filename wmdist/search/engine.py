@@ -6,13 +6,17 @@ from typing import Any
 import numpy as np
 
 from wmdist.search import kernels as K
+from wmdist.search import layout as L
 from wmdist.search.api import RecurrentFn, SearchConfig, SearchOutput
 from wmdist.search.latents import LatentStore
 from wmdist.search.noise import considered_visit_table, sample_root_noise
 
 
+_F64 = np.dtype(np.float64)
+
+
 def _as_float(x: Any, shape: tuple[int, ...], what: str) -> np.ndarray:
-    if type(x) is np.ndarray and x.dtype == np.float64 and x.shape == shape and x.flags.c_contiguous:
+    if type(x) is np.ndarray and x.dtype is _F64 and x.shape == shape and x.flags.c_contiguous:
         return x  # fast path: the common case costs no copy
     arr = np.asarray(x, dtype=np.float64)
     if arr.shape != shape:
@@ -21,19 +25,19 @@ def _as_float(x: Any, shape: tuple[int, ...], what: str) -> np.ndarray:
 
 
 def _params(config: SearchConfig, two_player: bool, add_noise: bool) -> np.ndarray:
-    p = np.zeros(K.NUM_PARAMS)
-    p[K.P_C1] = config.c1
-    p[K.P_C2] = config.c2
-    p[K.P_GAMMA_SIGN] = config.discount * (-1.0 if two_player else 1.0)
-    p[K.P_UNVISITED_PARENT] = 1.0 if config.unvisited_value == "parent" else 0.0
-    p[K.P_GUMBEL] = 1.0 if config.gumbel else 0.0
-    p[K.P_C_VISIT] = config.gumbel_c_visit
-    p[K.P_C_SCALE] = config.gumbel_c_scale
-    p[K.P_VALUE_PREFIX] = 1.0 if config.value_prefix else 0.0
-    p[K.P_HORIZON] = config.lstm_horizon
-    p[K.P_MAX_CONSIDERED] = config.gumbel_max_considered
+    p = np.zeros(L.NUM_PARAMS)
+    p[L.P_C1] = config.c1
+    p[L.P_C2] = config.c2
+    p[L.P_GAMMA_SIGN] = config.discount * (-1.0 if two_player else 1.0)
+    p[L.P_UNVISITED_PARENT] = 1.0 if config.unvisited_value == "parent" else 0.0
+    p[L.P_GUMBEL] = 1.0 if config.gumbel else 0.0
+    p[L.P_C_VISIT] = config.gumbel_c_visit
+    p[L.P_C_SCALE] = config.gumbel_c_scale
+    p[L.P_VALUE_PREFIX] = 1.0 if config.value_prefix else 0.0
+    p[L.P_HORIZON] = config.lstm_horizon
+    p[L.P_MAX_CONSIDERED] = config.gumbel_max_considered
     use_dirichlet = add_noise and not config.gumbel
-    p[K.P_NOISE_FRACTION] = config.dirichlet_fraction if use_dirichlet else 0.0
+    p[L.P_NOISE_FRACTION] = config.dirichlet_fraction if use_dirichlet else 0.0
     return p
 
 
@@ -95,7 +99,7 @@ def run_search(
     dirichlet, gumbel = sample_root_noise(rng, legal, config.dirichlet_alpha, config.gumbel, add_noise)
 
     nodes_f = np.zeros((batch, num_nodes, 4))
-    nodes_i = np.zeros((batch, num_nodes, 4), dtype=np.int32)
+    nodes_i = np.zeros((batch, num_nodes, 5), dtype=np.int32)
     children = np.full((batch, num_nodes, num_actions), -1, dtype=np.int32)
     edges_f = np.zeros((batch, num_nodes, 4, num_actions))
     minmax = np.empty((batch, 2))
@@ -107,25 +111,26 @@ def run_search(
     tree = (nodes_f, nodes_i, children, edges_f, legal, gumbel, minmax, table, params)
 
     status = K.init_roots(*tree, logits, value, dirichlet, store.store, store.staged, store.gathered, sel)
-    if status != K.OK:
+    if status != L.OK:
         raise ValueError("root_logits and root_value must be finite")
-    actions = sel[K.SEL_ACTION]  # view: the kernels update it in place
-    reset = sel[K.SEL_RESET]
+    actions = sel[L.SEL_ACTION]  # view: the kernels update it in place
+    reset = sel[L.SEL_RESET]
+    # Hot loop: one model call + one kernel call per simulation; names bound locally.
+    step, stage, latents_in = K.expand_backup_select, store.stage, store.gathered_latents
+    row_shape, logits_shape = (batch,), (batch, num_actions)
     for s in range(sims):
         if config.value_prefix:
-            out = recurrent_fn(store.gathered_latents, actions, reset.astype(bool))
+            out = recurrent_fn(latents_in, actions, reset.astype(bool))
         else:
-            out = recurrent_fn(store.gathered_latents, actions)
+            out = recurrent_fn(latents_in, actions)
         reward, leaf_value, leaf_logits, next_latents = out
-        reward = _as_float(reward, (batch,), "recurrent_fn reward")
-        leaf_value = _as_float(leaf_value, (batch,), "recurrent_fn value")
-        leaf_logits = _as_float(leaf_logits, (batch, num_actions), "recurrent_fn logits")
-        store.stage(next_latents)
-        status = K.expand_backup_select(
-            *tree, s + 1, reward, leaf_value, leaf_logits, store.store, store.staged, store.gathered, sel,
-            s + 1 < sims,
-        )
-        if status != K.OK:
+        reward = _as_float(reward, row_shape, "recurrent_fn reward")
+        leaf_value = _as_float(leaf_value, row_shape, "recurrent_fn value")
+        leaf_logits = _as_float(leaf_logits, logits_shape, "recurrent_fn logits")
+        stage(next_latents)
+        status = step(*tree, s + 1, reward, leaf_value, leaf_logits, store.store, store.staged, store.gathered,
+                      sel, s + 1 < sims)
+        if status != L.OK:
             raise ValueError(f"recurrent_fn returned non-finite reward, value or logits at simulation {s}")
 
     visit_counts = np.zeros((batch, num_actions), dtype=np.int64)

@@ -70,9 +70,9 @@ class ReferenceSearch:
         return child.reward + self.gamma_sign * child.mean()
 
     def normalize(self, q: float) -> float:
-        if self.hi > self.lo:
-            return min(max((q - self.lo) / (self.hi - self.lo), 0.0), 1.0)
-        return 0.0
+        """(q - min) / (max - min) clipped to [0, 1]; 0 while the tree has no Q range."""
+        inv_span = 1.0 / (self.hi - self.lo) if self.hi > self.lo else 0.0
+        return min(max((q - self.lo) * inv_span, 0.0), 1.0)
 
     def completed(self, node: Node, is_root: bool) -> tuple[list[float], list[float]]:
         """(completed Q, sigma) per action; Gumbel MuZero eq. 33 and eq. 8."""

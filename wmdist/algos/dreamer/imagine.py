@@ -71,7 +71,7 @@ def imagine(
             a_in = a if backprop else a.detach()
         with dyn_ctx():
             h = rssm.img_step(h, z, a_in)
-            z = rssm.sample(rssm.prior(h), generator, grad=backprop)
+            z = rssm.prior_sample(h, generator, grad=backprop)
         hs.append(h)
         zs.append(z)
     if rssm.classes:

@@ -62,7 +62,7 @@ class DreamerLearner(Learner):
         for key in ("obs", "action", "reward", "first", "terminal", "mask"):
             if key not in batch:
                 raise ValueError(f"Dreamer batch lacks field {key!r}")
-        out = {k: torch.as_tensor(np.asarray(v), device=self.device) for k, v in batch.items()}
+        out = {k: torch.as_tensor(np.array(v), device=self.device) for k, v in batch.items()}  # copy: replay arrays may be read-only
         b = out["mask"].shape[0]
         out["is_weight"] = out["is_weight"].float() if "is_weight" in out else torch.ones(b, device=self.device)
         return out

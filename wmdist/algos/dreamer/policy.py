@@ -44,7 +44,7 @@ class DreamerPolicy(Policy):
 
     @torch.no_grad()
     def act(self, obs, first, legal, to_play, explore):  # type: ignore[override]
-        obs_t = torch.as_tensor(np.asarray(obs), device=self.device)
+        obs_t = torch.as_tensor(np.array(obs), device=self.device)
         e = obs_t.shape[0]
         if self.h is None or self.h.shape[0] != e:
             self.reset(e)
@@ -57,7 +57,7 @@ class DreamerPolicy(Policy):
         dist = self.ac.policy(h, z)
         if self.spec.discrete:
             if legal is not None:
-                mask = torch.as_tensor(np.asarray(legal, bool), device=self.device)
+                mask = torch.as_tensor(np.array(legal, bool), device=self.device)
                 dist.logp = dist.logp.masked_fill(~mask, -torch.inf)
             action = dist.sample(self.generator) if explore else dist.mode()
             a_model = F.one_hot(action, self.spec.num_actions).float()

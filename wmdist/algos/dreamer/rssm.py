@@ -16,7 +16,7 @@ from torch import nn
 
 from wmdist.algos.dreamer.config import DreamerConfig
 from wmdist.algos.dreamer.layers import GRUCell, Latent, SplitLinear, norm_act
-from wmdist.nets.dists import categorical_kl, gaussian_kl, sample_onehot_index, unimix_logits
+from wmdist.nets.dists import categorical_kl, gaussian_kl, sample_index_from_probs, unimix_logits
 
 
 @dataclass
@@ -55,8 +55,9 @@ class RSSM(nn.Module):
     def sample(self, stats: torch.Tensor, generator: torch.Generator | None = None, grad: bool = True) -> Latent:
         """Draw z; `grad` keeps the straight-through / reparameterised path to the stats."""
         if self.classes:
-            index = sample_onehot_index(stats.detach(), generator)
-            return Latent(index=index, probs=stats.exp() if grad else None, classes=self.classes)
+            probs = stats.exp()
+            index = sample_index_from_probs(probs, generator)
+            return Latent(index=index, probs=probs if grad else None, classes=self.classes)
         mean, std = stats.chunk(2, -1)
         eps = torch.randn(mean.shape, generator=generator, device=mean.device)
         z = mean + std * eps
@@ -94,6 +95,15 @@ class RSSM(nn.Module):
 
     def prior(self, h: torch.Tensor) -> torch.Tensor:
         return self.stats(self.prior_net(h))
+
+    def prior_sample(self, h: torch.Tensor, generator: torch.Generator | None = None, grad: bool = True) -> Latent:
+        """z ~ p(z | h). Without gradients a categorical skips the log: probs are mixed and sampled directly."""
+        if grad or not self.classes:
+            return self.sample(self.prior(h), generator, grad)
+        probs = torch.softmax(self.prior_net(h).float().unflatten(-1, (self.stoch, self.classes)), -1)
+        if self.cfg.unimix > 0:
+            probs = probs * (1 - self.cfg.unimix) + self.cfg.unimix / self.classes
+        return Latent(index=sample_index_from_probs(probs, generator), classes=self.classes)
 
     def embed_part(self, embed: torch.Tensor) -> torch.Tensor:
         """The embedding's share of the posterior's first layer (for a whole sequence at once)."""

@@ -1,0 +1,87 @@
+"""symlog/symexp, two-hot golden values, unimix and straight-through gradients."""
+import torch
+
+from wmdist.algos.dreamer.layers import Latent, SplitLinear
+from wmdist.nets.dists import (
+    sample_index_from_probs, straight_through_onehot, symexp, symlog, twohot_bins, twohot_encode, twohot_loss,
+    twohot_mean, unimix_logits,
+)
+
+
+def test_symlog_symexp_round_trip_and_values():
+    x = torch.tensor([-1e6, -20.0, -1.0, -1e-4, 0.0, 1e-4, 1.0, 3.0, 1e6], dtype=torch.float64)
+    torch.testing.assert_close(symexp(symlog(x)), x, rtol=1e-9, atol=1e-12)
+    torch.testing.assert_close(symlog(torch.tensor([0.0, 1.0, -1.0])), torch.tensor([0.0, 0.6931472, -0.6931472]))
+
+
+def test_twohot_golden_values():
+    bins = torch.tensor([-2.0, -1.0, 0.0, 1.0, 2.0])
+    enc = twohot_encode(torch.tensor([0.0, 0.3, -1.75, 1.0, 5.0, -9.0]), bins)
+    expected = torch.tensor([
+        [0, 0, 1.0, 0, 0],
+        [0, 0, 0.7, 0.3, 0],
+        [0.75, 0.25, 0, 0, 0],
+        [0, 0, 0, 1.0, 0],
+        [0, 0, 0, 0, 1.0],  # outside the support: all mass on the end bin
+        [1.0, 0, 0, 0, 0],
+    ])
+    torch.testing.assert_close(enc, expected)
+
+
+def test_twohot_v3_support_recovers_value_and_loss():
+    bins = twohot_bins(255, -20, 20)
+    assert bins.shape == (255,) and bins[127] == 0.0
+    y = torch.tensor([0.0, 1.0, -7.5, 123.0, 3000.0])
+    target = twohot_encode(symlog(y), bins)
+    torch.testing.assert_close(target.sum(-1), torch.ones(5))
+    assert (target > 0).sum(-1).le(2).all()
+    # logits that put exactly the two-hot mass recover y through the mean
+    logits = torch.log(target.clamp_min(1e-30))
+    torch.testing.assert_close(twohot_mean(logits, bins), y, rtol=1e-4, atol=1e-4)
+    # cross-entropy with uniform logits is log(255)
+    loss = twohot_loss(torch.zeros(5, 255), y, bins)
+    torch.testing.assert_close(loss, torch.full((5,), float(torch.log(torch.tensor(255.0)))))
+
+
+def test_unimix_floor_and_sampler_frequencies():
+    logp = unimix_logits(torch.tensor([[100.0, 0.0, 0.0, 0.0]]), 0.01)
+    probs = logp.exp()[0]
+    torch.testing.assert_close(probs, torch.tensor([0.9925, 0.0025, 0.0025, 0.0025]))
+    g = torch.Generator().manual_seed(0)
+    p = torch.tensor([0.1, 0.2, 0.3, 0.4]).expand(200_000, 4)
+    idx = sample_index_from_probs(p, g)
+    freq = torch.bincount(idx, minlength=4).float() / 200_000
+    torch.testing.assert_close(freq, torch.tensor([0.1, 0.2, 0.3, 0.4]), atol=5e-3, rtol=0)
+
+
+def test_straight_through_gradient_is_identity_to_probs():
+    probs = torch.softmax(torch.randn(3, 5), -1).requires_grad_(True)
+    idx = torch.tensor([0, 4, 2])
+    st = straight_through_onehot(idx, probs)
+    torch.testing.assert_close(st.detach(), torch.nn.functional.one_hot(idx, 5).float())
+    w = torch.randn(3, 5)
+    (st * w).sum().backward()
+    torch.testing.assert_close(probs.grad, w)  # d(onehot + p - sg(p))/dp = 1
+
+
+def test_embedding_bag_linear_matches_dense_values_and_gradients():
+    torch.manual_seed(0)
+    n, s, c, d = 7, 4, 3, 5
+    lin = SplitLinear({"h": 6, "z": s * c}, d)
+    probs = torch.softmax(torch.randn(n, s, c), -1).requires_grad_(True)
+    idx = torch.randint(0, c, (n, s))
+    h = torch.randn(n, 6)
+    lat = Latent(index=idx, probs=probs, classes=c)
+    g = torch.randn(n, d)
+    out_fast = lin({"h": h, "z": lat})
+    (out_fast * g).sum().backward()
+    grads_fast = [probs.grad.clone()] + [p.grad.clone() for p in lin.parameters()]
+    probs.grad = None
+    lin.zero_grad()
+    out_dense = lin({"h": h, "z": lat.dense()})
+    (out_dense * g).sum().backward()
+    grads_dense = [probs.grad] + [p.grad for p in lin.parameters()]
+    torch.testing.assert_close(out_fast, out_dense)
+    for a, b in zip(grads_fast, grads_dense):
+        torch.testing.assert_close(a, b)
+    assert probs.grad.abs().sum() > 0
