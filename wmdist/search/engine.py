@@ -15,13 +15,17 @@ from wmdist.search.noise import considered_visit_table, sample_root_noise
 _F64 = np.dtype(np.float64)
 
 
-def _as_float(x: Any, shape: tuple[int, ...], what: str) -> np.ndarray:
+def _as_float(x: Any, shape: tuple[int, ...], what: str, out: np.ndarray | None = None) -> np.ndarray:
+    """x as a C-contiguous float64 array of `shape`: x itself if it already is one, else a
+    converted copy (into `out` if given: no allocation per simulation)."""
     if type(x) is np.ndarray and x.dtype is _F64 and x.shape == shape and x.flags.c_contiguous:
-        return x  # fast path: the common case costs no copy
-    arr = np.asarray(x, dtype=np.float64)
-    if arr.shape != shape:
-        raise ValueError(f"{what} must have shape {shape}, got {arr.shape}")
-    return np.ascontiguousarray(arr)
+        return x
+    if np.shape(x) != shape:
+        raise ValueError(f"{what} must have shape {shape}, got {np.shape(x)}")
+    if out is None:
+        return np.ascontiguousarray(x, dtype=np.float64)
+    np.copyto(out, x, casting="same_kind")
+    return out
 
 
 def _params(config: SearchConfig, two_player: bool, add_noise: bool) -> np.ndarray:
@@ -118,15 +122,16 @@ def run_search(
     # Hot loop: one model call + one kernel call per simulation; names bound locally.
     step, stage, latents_in = K.expand_backup_select, store.stage, store.gathered_latents
     row_shape, logits_shape = (batch,), (batch, num_actions)
+    reward_buf, value_buf, logits_buf = np.empty(batch), np.empty(batch), np.empty(logits_shape)
     for s in range(sims):
         if config.value_prefix:
             out = recurrent_fn(latents_in, actions, reset.astype(bool))
         else:
             out = recurrent_fn(latents_in, actions)
         reward, leaf_value, leaf_logits, next_latents = out
-        reward = _as_float(reward, row_shape, "recurrent_fn reward")
-        leaf_value = _as_float(leaf_value, row_shape, "recurrent_fn value")
-        leaf_logits = _as_float(leaf_logits, logits_shape, "recurrent_fn logits")
+        reward = _as_float(reward, row_shape, "recurrent_fn reward", reward_buf)
+        leaf_value = _as_float(leaf_value, row_shape, "recurrent_fn value", value_buf)
+        leaf_logits = _as_float(leaf_logits, logits_shape, "recurrent_fn logits", logits_buf)
         stage(next_latents)
         status = step(*tree, s + 1, reward, leaf_value, leaf_logits, store.store, store.staged, store.gathered,
                       sel, s + 1 < sims)

@@ -1,8 +1,9 @@
-"""Latent store: every node's latent kept as raw bytes in one preallocated [B, N, F] buffer.
+"""Latent store: every node's latent kept as raw bytes in one preallocated [B, N, W] buffer.
 
 Leaves (numpy arrays or CPU torch tensors, leading dim B) are packed side by side into a
-row of F bytes (each leaf's slot 8-byte aligned). The numba kernels copy rows in and out by
-node index, so one simulation costs two row copies per batch row whatever the dtype, and
+row of W 8-byte words (each leaf's slot 8-byte aligned). The numba kernels copy rows in and
+out by node index as uint64 words, so one simulation costs two row copies per batch row
+whatever the dtype, and
 `recurrent_fn` receives numpy / torch views of the gathered rows (torch via from_numpy,
 zero-copy) in the same nested tuple/list structure as the root latents.
 """
@@ -96,11 +97,11 @@ class LatentStore:
             nbytes = int(np.prod(shape, dtype=np.int64)) * dtype.itemsize
             slots.append(_Slot(_is_tensor(leaf), dtype, shape, offset, nbytes))
             offset += -(-nbytes // 8) * 8  # keep every slot 8-byte aligned
-        self.row_bytes = max(offset, 8)
+        words = max(offset, 8) // 8
         self._slots = slots
-        self.store = np.zeros((batch, num_nodes, self.row_bytes), dtype=np.uint8)  # [B, N, F]
-        self.staged = np.zeros((batch, self.row_bytes), dtype=np.uint8)  # [B, F] incoming latents
-        self.gathered = np.zeros((batch, self.row_bytes), dtype=np.uint8)  # [B, F] parents' latents
+        self.store = np.zeros((batch, num_nodes, words), dtype=np.uint64)  # [B, N, W]
+        self.staged = np.zeros((batch, words), dtype=np.uint64)  # [B, W] incoming latents
+        self.gathered = np.zeros((batch, words), dtype=np.uint64)  # [B, W] parents' latents
         # Staging views are numpy even for torch leaves: np.copyto from `leaf.numpy()` is
         # several times cheaper than torch's copy_ (and needs no no_grad context).
         self._staged_views = [self._typed_view(self.staged, s, as_torch=False) for s in slots]
@@ -111,7 +112,7 @@ class LatentStore:
     @staticmethod
     def _typed_view(buf: np.ndarray, slot: _Slot, as_torch: bool = True) -> Any:
         """A [B, *shape] view of the slot's bytes (numpy, or torch sharing the memory)."""
-        raw = buf[:, slot.offset : slot.offset + slot.nbytes]
+        raw = buf.view(np.uint8)[:, slot.offset : slot.offset + slot.nbytes]
         view = raw.view(slot.dtype).reshape((buf.shape[0],) + slot.shape)
         assert np.shares_memory(view, buf)
         return torch.from_numpy(view) if (slot.is_torch and as_torch) else view

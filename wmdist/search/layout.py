@@ -20,6 +20,8 @@ Array layout (N = num_simulations + 1 nodes, A actions):
     table    [M + 1, S] int32   sequential-halving schedule (noise.considered_visit_table)
     params   [NUM_PARAMS] float64  see P_* below
     sel      [3, B] int64       the pending leaf of each row: parent node, action, reset flag
+    store    [B, N, W] uint64   every node's latent as raw 8-byte words (latents.LatentStore);
+    staged, gathered [B, W]     the incoming leaves' latents / the pending parents' latents
 """
 from __future__ import annotations
 

@@ -71,8 +71,9 @@ class ReferenceSearch:
 
     def normalize(self, q: float) -> float:
         """(q - min) / (max - min) clipped to [0, 1]; 0 while the tree has no Q range."""
-        inv_span = 1.0 / (self.hi - self.lo) if self.hi > self.lo else 0.0
-        return min(max((q - self.lo) * inv_span, 0.0), 1.0)
+        if not self.hi > self.lo:
+            return 0.0
+        return min(max((q - self.lo) * (1.0 / (self.hi - self.lo)), 0.0), 1.0)
 
     def completed(self, node: Node, is_root: bool) -> tuple[list[float], list[float]]:
         """(completed Q, sigma) per action; Gumbel MuZero eq. 33 and eq. 8."""

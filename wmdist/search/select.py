@@ -54,7 +54,8 @@ def minmax_scale(lo, hi):
 @njit(cache=True, error_model="numpy")
 def normalize(q, lo, inv_span):
     """Tree min-max normalisation (MuZero appendix B), clipped to [0, 1]."""
-    return min(max((q - lo) * inv_span, 0.0), 1.0)
+    x = (q - lo) * inv_span
+    return 0.0 if x < 0.0 else (1.0 if x > 1.0 else x)
 
 
 @njit(cache=True, error_model="numpy")
@@ -66,8 +67,8 @@ def puct_select(nodes_f, nodes_i, children, edges_f, legal, minmax, params, b, n
     """
     c1 = params[P_C1]
     c2 = params[P_C2]
-    lo = minmax[b, 0]
-    inv_span = minmax_scale(lo, minmax[b, 1])
+    inv_span = minmax_scale(minmax[b, 0], minmax[b, 1])
+    lo = minmax[b, 0] if inv_span > 0.0 else 0.0  # no range yet (lo = +inf): every score 0
     parent_n = float(nodes_i[b, node, VISITS])
     pb_c = (c1 + math.log((parent_n + c2 + 1.0) / c2)) * math.sqrt(parent_n)  # MuZero eq. 2
     if params[P_UNVISITED_PARENT] != 0.0:

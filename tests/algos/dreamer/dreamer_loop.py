@@ -18,9 +18,10 @@ def tiny_config(version: int = 3, **over) -> DreamerConfig:
 
 
 def run_loop(env_id: str, cfg: DreamerConfig, env_steps: int, updates_every: int = 16, batch_size: int = 8,
-             seq_len: int = 16, num_envs: int = 4, seed: int = 0) -> tuple[Dreamer, list[dict[str, float]], int]:
+             seq_len: int = 16, num_envs: int = 4, seed: int = 0, log=None,
+             ) -> tuple[Dreamer, list[dict[str, float]], list[float]]:
     """Collect `env_steps` steps; after each `updates_every` env steps do one update.
-    Returns (algo, per-update metrics, episodes finished)."""
+    Returns (algo, per-update metrics, returns of the finished episodes)."""
     torch.manual_seed(seed)
     venv = make_vector_env(EnvConfig(id=env_id), num_envs, seed)
     algo = Dreamer(venv.spec, cfg, seed)
@@ -32,7 +33,9 @@ def run_loop(env_id: str, cfg: DreamerConfig, env_steps: int, updates_every: int
     metrics: list[dict[str, float]] = []
     step = venv.reset()
     reward = np.zeros(num_envs, np.float32)
-    episodes, version, t = 0, 0, 0
+    episode_returns: list[float] = []
+    running = np.zeros(num_envs)
+    version, t = 0, 0
     zeros_action = np.zeros((num_envs, *venv.spec.action_shape), venv.spec.action_dtype)
     while t < env_steps:
         actions, extras = policy.act(step.obs, step.first, step.legal, step.to_play, explore=True)
@@ -41,12 +44,16 @@ def run_loop(env_id: str, cfg: DreamerConfig, env_steps: int, updates_every: int
                     "terminal": no, **extras}, version)
         step = venv.step(actions)
         ended = step.terminated | step.truncated
+        running += step.reward
         if ended.any():
             ids = np.flatnonzero(ended)
             writer.add({"obs": step.final_obs[ids], "action": zeros_action[ids], "reward": step.reward[ids],
                         "first": np.zeros(len(ids), bool), "last": np.ones(len(ids), bool),
                         "terminal": step.terminated[ids]}, version, env_ids=ids)
-            episodes += len(ids)
+            episode_returns += [float(running[i]) for i in ids]
+            running[ids] = 0.0
+            if log is not None:
+                log(t, episode_returns, metrics[-1] if metrics else {})
         reward = np.where(step.first, 0.0, step.reward).astype(np.float32)
         t += num_envs
         out = writer.pop()
@@ -61,4 +68,4 @@ def run_loop(env_id: str, cfg: DreamerConfig, env_steps: int, updates_every: int
             policy.set_weights(learner.get_weights(), version)
     venv.close()
     algo.learner = learner  # type: ignore[attr-defined]
-    return algo, metrics, episodes
+    return algo, metrics, episode_returns

@@ -102,3 +102,11 @@ def test_bad_inputs_are_clear_errors():
         _algo(cont).validate()
     with pytest.raises(ValueError, match="visit_temperatures"):
         MuZeroConfig(visit_temperatures=[1.0], temperature_env_steps=[10]).validate()
+
+
+def test_bf16_autocast_update_is_finite_and_moves_weights():
+    learner = _algo(bf16=True).make_learner()
+    before = learner.get_weights()
+    res = learner.update(random_batch(np.random.default_rng(0), 8, 10, 3))
+    assert np.isfinite(res.metrics["loss"]) and res.metrics["loss"] > 0
+    assert any(not np.allclose(v, before[k]) for k, v in learner.get_weights().items())
