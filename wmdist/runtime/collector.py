@@ -7,6 +7,7 @@ before the first action after a restart).
 """
 from __future__ import annotations
 
+import os
 import time
 from typing import Any
 
@@ -89,7 +90,7 @@ class Collector:
         """Step every env `actors.segment_steps` times (unless the limiter holds us back)."""
         t0 = time.monotonic()
         stats: dict[str, Any] = {"index": self.index, "env_steps": 0, "episodes": [], "lengths": [],
-                                 "inserted": 0, "limiter_blocked": False}
+                                 "inserted": 0, "limiter_blocked": False, "pid": os.getpid()}
         if not self._flush(self.cfg.actors.insert_timeout):
             stats["limiter_blocked"] = True
             stats["busy_seconds"] = 0.0
@@ -101,7 +102,9 @@ class Collector:
         for _ in range(self.cfg.actors.segment_steps):
             s = self.step
             actions, extras = self._act()
-            record = {"obs": s.obs, "action": actions, "reward": s.reward, "first": s.first,
+            # the reward that arrived with o_t: none at an episode's first step (base.py convention)
+            record = {"obs": s.obs, "action": actions, "reward": np.where(s.first, 0.0, s.reward).astype(np.float32),
+                      "first": s.first,
                       "last": np.zeros(E, bool), "terminal": np.zeros(E, bool), **extras}
             self.writer.add(record, version=self.version)
             nxt = self.venv.step(actions)

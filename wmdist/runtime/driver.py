@@ -21,6 +21,7 @@ from wmdist.runtime.checkpoint import save_checkpoint
 from wmdist.runtime.topology import ACTOR_DIED, Topology
 
 LEARNER_SLICE_SECONDS = 1.0
+RETRY_SECONDS = 0.5  # wait before re-asking an actor whose process died
 
 
 @dataclass
@@ -76,6 +77,8 @@ class Driver:
         self.collector_versions: dict[int, int] = {}
         self.limiter_blocked = 0
         self.inflight: dict[Any, tuple[str, int]] = {}
+        self.pids: dict[tuple[str, int], int] = {}
+        self.retry_at: dict[tuple[str, int], float] = {}  # calls to re-issue once a dead actor may be back
         self.stop_reason: tuple[str, str] | None = None
         self.t_start = time.monotonic()
         self.elapsed0 = counters.elapsed_seconds
@@ -109,6 +112,11 @@ class Driver:
 
     def _handle(self, kind: str, i: int, res: dict) -> None:
         c = self.c
+        pid = res.get("pid")
+        if pid is not None:  # a new process behind the same actor = Ray restarted it
+            if self.pids.get((kind, i), pid) != pid:
+                c.restarts[kind] = c.restarts.get(kind, 0) + 1
+            self.pids[(kind, i)] = pid
         if kind == "collector":
             c.env_steps += int(res["env_steps"])
             c.episodes += len(res["episodes"])
@@ -184,9 +192,8 @@ class Driver:
                         if kind == "learner":
                             self.stop_reason = ("learner_failed", f"the learner failed: {_one_line(err)}")
                             break
-                        if _died(err):
-                            self.c.restarts[kind] = self.c.restarts.get(kind, 0) + 1
-                            self._reissue(kind, i)
+                        if _died(err):  # Ray restarts it; ask again shortly (counted when it reports)
+                            self.retry_at[(kind, i)] = time.monotonic() + RETRY_SECONDS
                             continue
                         if kind == "collector":
                             self.stop_reason = ("error", f"collector {i} failed: {_one_line(err)}")
@@ -201,6 +208,10 @@ class Driver:
                         self.waiting_reanalyzers.discard(i)
                         self._issue("reanalyzer", i)
                 now = time.monotonic()
+                for (kind, i), at in list(self.retry_at.items()):
+                    if now >= at:
+                        del self.retry_at[(kind, i)]
+                        self._reissue(kind, i)
                 if self.evaluator_idle and now - self.last_eval >= self.cfg.eval.every_seconds:
                     self.evaluator_idle = False
                     self.last_eval = now

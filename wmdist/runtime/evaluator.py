@@ -1,6 +1,7 @@
 """Greedy evaluation: the evaluator role during training and `wmdist eval` afterwards."""
 from __future__ import annotations
 
+import os
 import time
 from typing import Any
 
@@ -63,7 +64,7 @@ class EvaluatorRole:
             self.version = version
         returns, lengths = play_episodes(self.policy, self.venv, self.cfg.eval.episodes)
         return {"version": self.version, "returns": returns, "lengths": lengths,
-                "busy_seconds": time.monotonic() - t0}
+                "busy_seconds": time.monotonic() - t0, "pid": os.getpid()}
 
     def ping(self) -> bool:
         return True

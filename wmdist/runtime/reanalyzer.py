@@ -2,6 +2,7 @@
 latest weights, write fresh targets back (dropped by replay if the item changed since)."""
 from __future__ import annotations
 
+import os
 import time
 from typing import Any
 
@@ -31,13 +32,15 @@ class ReanalyzerRole:
             self.version = version
         sample = self.replay.sample(self.cfg.reanalyze.batch_size, timeout=1.0, limited=False)
         if sample is None:
-            return {"reanalyzed": 0, "busy_seconds": time.monotonic() - t0, "version": self.version}
+            return {"reanalyzed": 0, "busy_seconds": time.monotonic() - t0, "version": self.version,
+                "pid": os.getpid()}
         batch = dict(sample.data, mask=sample.mask, is_weight=sample.is_weight)
         fields = self.reanalyzer.reanalyze(batch)
         self.replay.write_back(sample.keys, sample.stamps, fields)
         n = len(sample.mask)
         self.done += n
-        return {"reanalyzed": n, "busy_seconds": time.monotonic() - t0, "version": self.version}
+        return {"reanalyzed": n, "busy_seconds": time.monotonic() - t0, "version": self.version,
+                "pid": os.getpid()}
 
     def ping(self) -> bool:
         return True

@@ -74,6 +74,15 @@ class Topology:
                     ray.kill(actor, no_restart=True)
                 except Exception:  # noqa: BLE001
                     pass
+        # kills are asynchronous: give the processes a moment to hand their CPUs back, so a
+        # next run in the same Ray instance (tests, notebooks) is not left pending
+        import time
+
+        deadline = time.monotonic() + 5.0  # on a shared cluster other jobs may keep CPUs: bounded
+        while time.monotonic() < deadline:
+            if ray.available_resources().get("CPU", 0.0) >= ray.cluster_resources().get("CPU", 0.0) - 1e-6:
+                break
+            time.sleep(0.1)
 
 
 def build(cfg: RunConfig, spec: EnvSpec, run_dir: Path, fields: dict) -> Topology:

@@ -57,10 +57,10 @@ def predict_open_loop(algo, weights: Weights, obs: np.ndarray, actions: np.ndarr
     for t in range(len(obs)):
         keep = torch.full((1, 1), 0.0 if t == 0 else 1.0)
         h = rssm.img_step(h, z, a_prev, keep)
-        if t < context:
-            z = rssm.mode(rssm.post(h, rssm.embed_part(wm.encode(obs_t[t:t + 1]))))
+        if t < context:  # sampled latents, as the model itself imagines (the mode can sit on one class)
+            z = rssm.sample(rssm.post(h, rssm.embed_part(wm.encode(obs_t[t:t + 1]))), gen, grad=False)
         else:
-            z = rssm.mode(rssm.prior(h))
+            z = rssm.prior_sample(h, gen, grad=False)
         pred = wm.decode(h, z)[0]
         if wm.image:
             pred = ((pred + 0.5).clamp(0, 1) * 255).to(torch.uint8)

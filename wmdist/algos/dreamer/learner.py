@@ -26,8 +26,8 @@ def policy_weights(wm: WorldModel, ac: ActorCritic) -> Weights:
 
 
 def load_policy_weights(wm: WorldModel, ac: ActorCritic, weights: Weights) -> None:
-    wm_sd = {k[3:]: torch.as_tensor(np.asarray(v)) for k, v in weights.items() if k.startswith("wm.")}
-    actor_sd = {k[6:]: torch.as_tensor(np.asarray(v)) for k, v in weights.items() if k.startswith("actor.")}
+    wm_sd = {k[3:]: torch.as_tensor(np.array(v)) for k, v in weights.items() if k.startswith("wm.")}
+    actor_sd = {k[6:]: torch.as_tensor(np.array(v)) for k, v in weights.items() if k.startswith("actor.")}
     if not wm_sd or not actor_sd:
         raise ValueError("Dreamer weights need 'wm.*' and 'actor.*' entries")
     wm.load_state_dict(wm_sd)
