@@ -1,0 +1,41 @@
+"""`wmdist eval RUN_DIR` plays greedy episodes from a run's latest checkpoint (no Ray needed)."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from wmdist.cli import main
+from wmdist.config.loader import dump_yaml, load_config
+from wmdist.runtime.checkpoint import save_checkpoint
+
+CFG = str(Path(__file__).parent / "fake.yaml")
+
+
+def _run_dir(tmp_path: Path, w: np.ndarray) -> Path:
+    cfg = load_config(CFG, [f"run.dir={tmp_path}"])
+    run_dir = tmp_path / "run"
+    run_dir.mkdir(parents=True)
+    (run_dir / "config.yaml").write_text(dump_yaml(cfg))
+    save_checkpoint(run_dir, {"w": w}, {"w": w}, 7, {"updates": 3, "env_steps": 100}, None, keep=2)
+    return run_dir
+
+
+def test_eval_prints_greedy_returns_of_the_checkpoint(tmp_path, capsys):
+    # a linear policy that pushes the cart toward the pole's lean balances far longer than one that pushes away
+    good = np.array([[0, 0], [0, 0], [-1, 1], [-1, 1]], np.float32)
+    bad = -good
+    returns = {}
+    for name, w in (("good", good), ("bad", bad)):
+        run_dir = _run_dir(tmp_path / name, w)
+        assert main(["eval", str(run_dir), "--episodes", "4"]) == 0
+        out = capsys.readouterr().out
+        assert "weights v7" in out and "mean return" in out
+        returns[name] = float(out.split("mean return ")[1].split()[0])
+    assert returns["good"] > 3 * returns["bad"], returns
+
+
+def test_eval_of_a_folder_without_checkpoint_is_one_line(tmp_path, capsys):
+    assert main(["eval", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert "not a wmdist run directory" in err and err.count("\n") == 1
