@@ -5,6 +5,8 @@ fixed snapshot (the broker is the only fake). CartPole is deterministic, so ever
 transition (obs_t, action_t) -> obs_{t+1} can be replayed in gymnasium: a shifted action,
 observation or final-observation record would show up as a mismatch.
 """
+from pathlib import Path
+
 import numpy as np
 import torch
 
@@ -28,7 +30,7 @@ class RecordingReplay:
 
 
 def _collect(monkeypatch):
-    cfg = load_config("configs/muzero_cartpole.yaml", [
+    cfg = load_config(Path(__file__).parents[2] / "configs" / "muzero_cartpole.yaml", [
         "algo.search.num_simulations=4", "actors.envs_per_actor=4", "actors.segment_steps=40",
         f"replay.seq_len={T}", f"replay.overlap={OVERLAP}"])
     spec = env_spec(cfg.env)
@@ -36,7 +38,7 @@ def _collect(monkeypatch):
     monkeypatch.setattr(collector_mod, "pull",
                         lambda broker, known, timeout=30.0: (0, weights) if known < 0 else (0, None))
     replay = RecordingReplay()
-    col = collector_mod.Collector(cfg, spec, 0, replay, None, incarnation=1)
+    col = collector_mod.Collector(cfg, spec, 0, replay, None)
     env_steps = 0
     for _ in range(3):
         env_steps += col.run_segment(env_steps, 0)["env_steps"]

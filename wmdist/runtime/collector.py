@@ -15,25 +15,23 @@ import numpy as np
 
 from wmdist.config.schema import RunConfig
 from wmdist.envs.spec import EnvSpec
-from wmdist.runtime.roles import build_algorithm, set_threads
+from wmdist.runtime.roles import build_algorithm, device_for, set_threads
 from wmdist.runtime.weights import pull
 
 
 class Collector:
-    def __init__(self, cfg: RunConfig, spec: EnvSpec, index: int, replay: Any, broker: Any, threads: int = 1,
-                 incarnation: int = 0) -> None:
-        from wmdist.envs.factory import make_env  # noqa: F401  (fail early on a broken env id)
+    def __init__(self, cfg: RunConfig, spec: EnvSpec, index: int, replay: Any, broker: Any, threads: int = 1) -> None:
         from wmdist.envs.vector import make_vector_env
         from wmdist.replay.writer import SequenceWriter
 
         set_threads(threads)
         self.cfg, self.index, self.replay, self.broker = cfg, index, replay, broker
-        self.incarnation = _incarnation() if incarnation == 0 else incarnation
+        self.incarnation = _incarnation()
         E = cfg.actors.envs_per_actor
         # a restarted collector must not replay its predecessor's random stream
         seed = cfg.run.seed * 1_000_003 + index * 10_007 + self.incarnation * 7_919
         self.algo = build_algorithm(cfg, spec, seed)
-        self.policy = self.algo.make_policy("cpu")
+        self.policy = self.algo.make_policy(device_for(cfg.actors.gpus))
         self.venv = make_vector_env(cfg.env, E, seed)
         self.writer = SequenceWriter(self.algo.step_fields(), cfg.replay.seq_len, cfg.replay.overlap, E)
         self.rng = np.random.default_rng(seed)
