@@ -31,9 +31,8 @@ def main() -> None:
     topo = build(cfg, spec, tmp, build_algorithm(cfg, spec, 0).step_fields())
     try:
         nodes = ray.get([c.node_id.remote() for c in topo.collectors])
-        learner_node = ray.get(topo.learner.ping.remote()) and ray.get_runtime_context().get_node_id()
         result = Driver(topo, Counters()).run()
-        print(json.dumps({"collector_nodes": nodes, "worker_node": worker.node_id, "driver_node": learner_node,
+        print(json.dumps({"collector_nodes": nodes, "worker_node": worker.node_id, "driver_node": ray.get_runtime_context().get_node_id(),
                           "updates": result.counters.updates, "env_steps": result.counters.env_steps,
                           "status": result.status}))
     finally:

@@ -89,7 +89,6 @@ def build(cfg: RunConfig, spec: EnvSpec, run_dir: Path, fields: dict) -> Topolog
     """Create every actor (after checking the cluster can hold them all)."""
     import ray
 
-    from wmdist.replay.config import ReplayConfig  # noqa: F401  (documents the dependency)
     from wmdist.runtime.collector import Collector
     from wmdist.runtime.evaluator import EvaluatorRole
     from wmdist.runtime.learner import LearnerRole
