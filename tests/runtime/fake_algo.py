@@ -21,6 +21,7 @@ class FakeConfig:
     update_sleep: float = param(0.0, "seconds each update sleeps (a slow learner)", ge=0)
     act_sleep: float = param(0.0, "seconds each act call sleeps (a slow policy)", ge=0)
     crash_at: int = param(0, "raise an exception in update N (0 = never): a learner failure", ge=0)
+    policy_fails: bool = param(False, "make_policy raises: collectors fail in their constructor")
 
 
 def _obs_dim(spec) -> int:
@@ -110,6 +111,8 @@ class FakeAlgo(Algorithm):
         return {"version_seen": FieldSpec((), "int32")}
 
     def make_policy(self, device="cpu"):
+        if self.config.policy_fails:
+            raise ValueError("simulated policy construction failure")
         p = FakePolicy(self.spec, self.seed)
         p.cfg_sleep = self.config.act_sleep
         return p

@@ -216,3 +216,15 @@ def test_learner_failure_stops_the_run_naming_resume(ray_session, tmp_path, caps
     err = capsys.readouterr().err
     assert "learner failed" in err and "simulated learner crash" in err
     assert "wmdist train --resume" in err
+
+
+def test_collector_that_cannot_start_stops_the_run_with_the_cause(ray_session, tmp_path, capsys):
+    from wmdist.runtime.train import train
+
+    cfg = load_config(CFG, [f"run.dir={tmp_path}", "algo.policy_fails=true", "actors.num=1",
+                            "run.max_minutes=2"])
+    t0 = time.monotonic()
+    assert train(cfg=cfg) == 1
+    err = capsys.readouterr().err
+    assert "could not start" in err and "ValueError: simulated policy construction failure" in err
+    assert time.monotonic() - t0 < 60  # stopped at once, not after the time budget

@@ -28,6 +28,9 @@ class EnvSpec:
     action_high: tuple[float, ...] = ()
     players: int = 1
     max_episode_steps: int | None = None
+    # Board games: (obs_perm, action_perm) pairs, identity first; obs'[obs_perm[i]] = obs[i]
+    # and a' = action_perm[a] give an equivalent position (for data augmentation).
+    symmetries: tuple = ()
 
     @property
     def discrete(self) -> bool:

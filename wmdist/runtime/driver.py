@@ -145,8 +145,9 @@ class Driver:
                 c.eval_episodes += len(res["returns"])
                 self.eval_return = float(np.mean(res["returns"]))
                 self.eval_length = float(np.mean(res["lengths"]))
+                # eval_min: the worst episode (board games: < 0 means the agent lost a game).
                 self._log({"kind": "eval", "eval_return": self.eval_return, "eval_length": self.eval_length,
-                           "eval_version": res["version"]})
+                           "eval_min": float(np.min(res["returns"])), "eval_version": res["version"]})
 
     def _reissue(self, kind: str, i: int) -> None:
         if self.stop_reason is not None:
@@ -191,6 +192,9 @@ class Driver:
                     except Exception as err:  # noqa: BLE001 - classified below
                         if kind == "learner":
                             self.stop_reason = ("learner_failed", f"the learner failed: {_one_line(err)}")
+                            break
+                        if _failed_to_start(err):  # a restart would fail the same way
+                            self.stop_reason = ("error", f"{kind} {i} could not start: {_root_cause(err)}")
                             break
                         if _died(err):  # Ray restarts it; ask again shortly (counted when it reports)
                             self.retry_at[(kind, i)] = time.monotonic() + RETRY_SECONDS
@@ -317,6 +321,21 @@ class Driver:
             except Exception:  # noqa: BLE001 - a plot must never stop training
                 pass
         return snap
+
+
+def _failed_to_start(err: BaseException) -> bool:
+    """The actor's constructor raised (Ray reports it as a death in the creation task)."""
+    return _died(err) and "creation task" in str(err)
+
+
+def _root_cause(err: BaseException) -> str:
+    """The last 'SomeError: message' line of a remote traceback, else the last line."""
+    lines = [ln.strip() for ln in str(err).splitlines() if ln.strip()]
+    for ln in reversed(lines):
+        head = ln.split(":", 1)[0]
+        if head.isidentifier() and (head.endswith("Error") or head.endswith("Exception")):
+            return ln[:400]
+    return lines[-1][:400] if lines else type(err).__name__
 
 
 def _one_line(err: BaseException) -> str:

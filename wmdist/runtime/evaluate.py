@@ -11,6 +11,7 @@ import numpy as np
 
 from wmdist.config.errors import ConfigError
 from wmdist.runtime import checkpoint as ck
+from wmdist.runtime.board_eval import default_opponent, play_games
 from wmdist.runtime.roles import build_algorithm
 from wmdist.runtime.train import env_spec_or_error, load_run_config
 
@@ -30,22 +31,6 @@ def _greedy(policy, obs: np.ndarray, legal: np.ndarray | None, to_play: int | No
     actions, _ = policy.act(obs[None], np.array([first]), None if legal is None else legal[None],
                             None if to_play is None else np.array([to_play]), False)
     return np.asarray(actions)[0]
-
-
-def play_board(policy, env, agent_player: int, opponent: Callable[[object], int]) -> float:
-    """One game; returns +1 / 0 / -1 from the agent's point of view."""
-    env.reset()
-    first = True
-    while True:
-        mover = env.to_play()
-        if mover == agent_player:
-            action = int(_greedy(policy, env.game.observe(env.state), env.legal_actions(), mover, first))
-            first = False
-        else:
-            action = opponent(env.state)
-        _, reward, terminated, _ = env.step(action)
-        if terminated:
-            return reward if mover == agent_player else -reward
 
 
 def _human(env, out: IO[str]) -> Callable[[object], int]:
@@ -72,19 +57,9 @@ def evaluate_run(run_dir: str, episodes: int = 10, video: str | None = None, hum
         from wmdist.envs.factory import make_env
 
         env = make_env(cfg.env, cfg.run.seed)
-        if human:
-            opponent = _human(env, out)
-        elif cfg.env.id == "board:tictactoe":
-            from wmdist.envs.boardgames.solver import SolverOpponent
-
-            opponent = SolverOpponent(seed=cfg.run.seed).act
-        else:
-            rng = np.random.default_rng(cfg.run.seed)
-            opponent = lambda s: int(rng.choice(np.flatnonzero(env.legal_actions())))  # noqa: E731
-        results = {0: [], 1: []}
-        for g in range(episodes):
-            results[g % 2].append(play_board(policy, env, g % 2, opponent))
-        for p, rs in results.items():
+        opponent = _human(env, out) if human else default_opponent(env, cfg.run.seed)
+        outcomes = play_games(policy, env, episodes, opponent)
+        for p, rs in outcomes.items():
             rs = np.asarray(rs)
             print(f"agent as player {p}: {len(rs)} games, won {(rs > 0).sum()}, drew {(rs == 0).sum()}, "
                   f"lost {(rs < 0).sum()}", file=out)

@@ -53,7 +53,18 @@ class EvaluatorRole:
         self.cfg, self.broker = cfg, broker
         seed = cfg.run.seed + 99_991
         self.policy = build_algorithm(cfg, spec, seed).make_policy("cpu")
-        self.venv = make_vector_env(cfg.env, min(cfg.eval.envs, cfg.eval.episodes), seed)
+        self.board = None
+        if spec.players == 2:
+            # Greedy self-play measures nothing: play an opponent (the exact solver for
+            # tic-tac-toe), so the eval return is the mean outcome and its minimum says
+            # whether the agent lost a game.
+            from wmdist.envs.factory import make_env
+            from wmdist.runtime.board_eval import default_opponent
+
+            self.board = make_env(cfg.env, seed)
+            self.opponent = default_opponent(self.board, seed)
+        else:
+            self.venv = make_vector_env(cfg.env, min(cfg.eval.envs, cfg.eval.episodes), seed)
         self.version = -1
 
     def evaluate(self) -> dict:
@@ -62,7 +73,14 @@ class EvaluatorRole:
         if weights is not None:
             self.policy.set_weights(weights, version)
             self.version = version
-        returns, lengths = play_episodes(self.policy, self.venv, self.cfg.eval.episodes)
+        if self.board is not None:
+            from wmdist.runtime.board_eval import play_games
+
+            outcomes = play_games(self.policy, self.board, self.cfg.eval.episodes, self.opponent)
+            returns = outcomes[0] + outcomes[1]
+            lengths = [0] * len(returns)
+        else:
+            returns, lengths = play_episodes(self.policy, self.venv, self.cfg.eval.episodes)
         return {"version": self.version, "returns": returns, "lengths": lengths,
                 "busy_seconds": time.monotonic() - t0, "pid": os.getpid()}
 

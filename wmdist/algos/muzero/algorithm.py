@@ -41,7 +41,8 @@ class MuZero(Algorithm):
         return MuZeroPolicy(self._net(), self.config, self.spec, self.seed + 1, device)
 
     def make_learner(self, device: str = "cpu") -> MuZeroLearner:
-        return MuZeroLearner(self._net(), self.config, self.spec.num_actions, self.spec.players, self.seed + 2, device)
+        return MuZeroLearner(self._net(), self.config, self.spec.num_actions, self.spec.players, self.seed + 2, device,
+                             symmetries=self.spec.symmetries)
 
     def make_reanalyzer(self, device: str = "cpu") -> MuZeroReanalyzer:
         return MuZeroReanalyzer(self._net(), self.config, self.spec, self.seed + 3, device)

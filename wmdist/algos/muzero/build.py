@@ -17,6 +17,8 @@ def check_spec(spec: EnvSpec, cfg: MuZeroConfig) -> None:
         raise ValueError(f"muzero needs discrete actions; {spec.id} has continuous actions {spec.action_shape}")
     if spec.players not in (1, 2):
         raise ValueError(f"muzero supports 1 or 2 players, {spec.id} has {spec.players}")
+    if cfg.augment_symmetries and not spec.symmetries:
+        raise ValueError(f"algo.augment_symmetries needs a board game with declared symmetries; {spec.id} has none")
     kind = network_kind(spec, cfg)
     if kind == "conv" and len(spec.obs_shape) != 3:
         raise ValueError(f"algo.network=conv needs (H, W, C) image observations, {spec.id} has {spec.obs_shape}")

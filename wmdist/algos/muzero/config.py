@@ -41,6 +41,8 @@ class MuZeroConfig:
     dynamics_grad_scale: float = param(0.5, "gradient scale at the dynamics input (paper: 1/2)", ge=0, le=1)
     priority_eps: float = param(1e-6, "added to |value error| so every sample keeps a chance", gt=0)
     bf16: bool = param(False, "run the learner's forward pass under CPU bfloat16 autocast")
+    augment_symmetries: bool = param(False, "board games: train each sample on a random rotation/reflection of the board "
+                                            "(AlphaGo Zero's augmentation; not in the MuZero paper)")
 
     # acting
     visit_temperatures: list = param([1.0, 0.5, 0.25], "visit-count temperatures in turn (paper Atari: 1, 0.5, 0.25)")

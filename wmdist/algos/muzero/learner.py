@@ -13,6 +13,7 @@ from wmdist.algos.muzero.build import to_numpy_weights
 from wmdist.algos.muzero.config import MuZeroConfig
 from wmdist.algos.muzero.losses import LossTargets, LossWeights, unroll_loss
 from wmdist.algos.muzero.networks import MuZeroNet
+from wmdist.algos.muzero.symmetry import Symmetries
 from wmdist.algos.muzero.targets import UnrollTargets, make_targets, sample_starts
 from wmdist.nets.optim import GuardedStep
 from wmdist.nets.support import support_to_scalar
@@ -22,7 +23,7 @@ REQUIRED = ("obs", "action", "reward", "first", "last", "terminal", "search_poli
 
 class MuZeroLearner(Learner):
     def __init__(self, net: MuZeroNet, cfg: MuZeroConfig, num_actions: int, players: int, seed: int,
-                 device: str = "cpu") -> None:
+                 device: str = "cpu", symmetries: tuple = ()) -> None:
         self.cfg = cfg
         self.device = torch.device(device)
         self.net = net.to(self.device)
@@ -33,6 +34,7 @@ class MuZeroLearner(Learner):
         self.step = GuardedStep(self.net.parameters(), cfg.optim)
         self.rng = np.random.default_rng(seed)
         self.updates = 0
+        self.symmetries = Symmetries(symmetries) if cfg.augment_symmetries else None
         self.weights = LossWeights(cfg.value_loss_weight, cfg.reward_loss_weight, cfg.policy_loss_weight,
                                    cfg.dynamics_grad_scale)
 
@@ -70,12 +72,16 @@ class MuZeroLearner(Learner):
         tg = make_targets(batch, t0, valid, cfg.unroll_steps, cfg.td_steps, self.gamma, self.num_actions, self.rng)
         z = tg.value_target(self._bootstrap_values(batch, tg))  # [B, K+1]
         rows = np.arange(len(t0))
-        obs0 = self._tensor(batch["obs"][rows, t0])
+        obs0, actions, policy = batch["obs"][rows, t0], tg.actions, tg.policy
+        if self.symmetries is not None:
+            g = self.rng.integers(0, self.symmetries.size, len(t0))  # [B] one random symmetry per sample
+            obs0, actions, policy = self.symmetries.apply(g, obs0, actions, policy)
         lt = LossTargets(
-            actions=self._tensor(tg.actions), value=self._tensor(z), value_w=self._tensor(tg.value_w),
+            actions=self._tensor(actions), value=self._tensor(z), value_w=self._tensor(tg.value_w),
             reward=self._tensor(tg.reward), reward_w=self._tensor(tg.reward_w),
-            policy=self._tensor(tg.policy), policy_w=self._tensor(tg.policy_w),
+            policy=self._tensor(policy), policy_w=self._tensor(tg.policy_w),
         )
+        obs0 = self._tensor(obs0)
         is_w = self._tensor(batch["is_weight"], torch.float32) * self._tensor(valid, torch.float32)  # [B]
         amp = torch.autocast("cpu", dtype=torch.bfloat16) if cfg.bf16 else contextlib.nullcontext()
         with amp:

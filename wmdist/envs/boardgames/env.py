@@ -29,8 +29,17 @@ class BoardEnv(Env):
         self.spec = EnvSpec(
             id=f"board:{self.game.name}", obs_shape=(self.game.obs_dim,), obs_dtype="float32",
             obs_kind="vector", num_actions=self.game.num_actions, players=2,
-            max_episode_steps=self.game.num_cells,
+            max_episode_steps=self.game.num_cells, symmetries=self._obs_symmetries(),
         )
+
+    def _obs_symmetries(self) -> tuple:
+        """Game symmetries lifted to the observation: each of the 3 planes permuted alike."""
+        n = self.game.num_cells
+        out = []
+        for cell_perm, action_perm in self.game.symmetries():
+            obs_perm = tuple(p * n + c for p in range(3) for c in cell_perm)
+            out.append((obs_perm, action_perm))
+        return tuple(out)
 
     def reset(self, seed: int | None = None) -> np.ndarray:
         self.state = self.game.initial()

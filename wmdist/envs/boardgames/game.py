@@ -41,6 +41,29 @@ class Game:
         self.num_cells = rows * cols
         self.obs_dim = 3 * self.num_cells
 
+    def symmetries(self) -> tuple[tuple[tuple[int, ...], tuple[int, ...]], ...]:
+        """The board's symmetries as (cell_perm, action_perm) pairs, identity first.
+
+        A symmetry sends cell c to cell_perm[c] and action a to action_perm[a]; the game is
+        unchanged by it, so an agent may learn from transformed positions (data
+        augmentation). Square boards without gravity: the 8 rotations and reflections;
+        otherwise (gravity or non-square): the identity and the left-right mirror.
+        """
+        grid = np.arange(self.num_cells).reshape(self.rows, self.cols)
+        views = [grid, grid[:, ::-1]]
+        if self.rows == self.cols and not self.gravity:
+            views = [np.rot90(g, k) for g in (grid, grid.T) for k in range(4)]
+        out = []
+        for v in views:
+            cell_perm = np.empty(self.num_cells, np.int64)
+            cell_perm[v.ravel()] = np.arange(self.num_cells)  # cell v[i] lands at position i
+            if self.gravity:
+                action_perm = cell_perm[: self.cols] if v is grid else (self.cols - 1 - np.arange(self.cols))
+            else:
+                action_perm = cell_perm
+            out.append((tuple(int(x) for x in cell_perm), tuple(int(x) for x in action_perm)))
+        return tuple(out)
+
     def initial(self) -> State:
         return State(board=(EMPTY,) * self.num_cells, to_play=0)
 

@@ -1,0 +1,62 @@
+"""Board-game evaluation against the exact solver: a perfect agent never loses, a random
+one does, and outcomes are counted from the agent's side."""
+from __future__ import annotations
+
+import numpy as np
+
+from wmdist.algos.base import Policy
+from wmdist.envs.boardgames.env import BoardEnv
+from wmdist.envs.boardgames.game import State
+from wmdist.envs.boardgames.solver import best_actions
+from wmdist.runtime.board_eval import default_opponent, play_games, summary
+
+
+def _board_from_obs(obs: np.ndarray, to_play: int) -> list[int]:
+    own, opp = obs[:9] > 0, obs[9:18] > 0  # planes from the view of the player to move
+    board = np.zeros(9, np.int64)
+    board[own], board[opp] = to_play + 1, 2 - to_play
+    return board.tolist()
+
+
+class SolverPolicy(Policy):
+    """Plays the first optimal move of the position it sees (only through obs and to_play)."""
+
+    def set_weights(self, weights, version):  # noqa: D102
+        pass
+
+    def act(self, obs, first, legal, to_play, explore):  # noqa: D102
+        acts = [best_actions(_board_from_obs(o, int(p)), int(p))[0] for o, p in zip(obs, to_play)]
+        return np.array(acts), {}
+
+
+class RandomPolicy(SolverPolicy):
+    def __init__(self) -> None:
+        self.rng = np.random.default_rng(0)
+
+    def act(self, obs, first, legal, to_play, explore):  # noqa: D102
+        return np.array([self.rng.choice(np.flatnonzero(m)) for m in legal]), {}
+
+
+def test_a_perfect_agent_never_loses_to_the_solver() -> None:
+    env = BoardEnv("tictactoe")
+    outcomes = play_games(SolverPolicy(), env, 40, default_opponent(env, seed=1))
+    assert len(outcomes[0]) == len(outcomes[1]) == 20
+    s = summary(outcomes)
+    assert s["lost_p0"] == s["lost_p1"] == 0
+    assert s["won_p0"] == s["won_p1"] == 0  # perfect against perfect: all draws
+
+
+def test_a_random_agent_loses_and_wins_are_from_its_side() -> None:
+    env = BoardEnv("tictactoe")
+    outcomes = play_games(RandomPolicy(), env, 40, default_opponent(env, seed=2))
+    s = summary(outcomes)
+    assert s["won_p0"] == s["won_p1"] == 0  # nobody beats the solver
+    assert s["lost_p0"] + s["lost_p1"] >= 20  # a random player loses most games
+    assert sum(s.values()) == 40
+
+
+def test_the_solver_opponent_varies_its_optimal_moves() -> None:
+    opp = default_opponent(BoardEnv("tictactoe"), seed=3)
+    first_moves = {opp(State(board=(0,) * 9, to_play=0)) for _ in range(50)}
+    assert len(first_moves) > 1  # every opening is a draw, so several are optimal
+    assert first_moves <= set(range(9))
