@@ -228,3 +228,17 @@ def test_collector_that_cannot_start_stops_the_run_with_the_cause(ray_session, t
     err = capsys.readouterr().err
     assert "could not start" in err and "ValueError: simulated policy construction failure" in err
     assert time.monotonic() - t0 < 60  # stopped at once, not after the time budget
+
+
+def test_run_stops_once_the_eval_return_reaches_the_target(ray_session, tmp_path):
+    import io
+
+    from wmdist.runtime.train import train
+
+    cfg = load_config(CFG, [f"run.dir={tmp_path}", "run.stop_at_eval_return=-1000000", "eval.every_seconds=1",
+                            "actors.num=1", "run.max_minutes=3", "run.max_env_steps=0"])
+    t0 = time.monotonic()
+    out = io.StringIO()
+    assert train(cfg=cfg, out=out) == 0
+    assert "reached -1e+06" in out.getvalue()
+    assert time.monotonic() - t0 < 90  # long before the 3-minute budget

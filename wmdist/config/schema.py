@@ -22,6 +22,7 @@ class RunSection:
     max_env_steps: int = param(50_000, "stop after this many env steps (0 = no limit)", ge=0)
     max_updates: int = param(0, "stop after this many learner updates (0 = no limit)", ge=0)
     max_minutes: float = param(30.0, "stop after this much wall time (0 = no limit)", ge=0)
+    stop_at_eval_return: float | None = param(None, "stop once a greedy evaluation's mean return reaches this (null = never)")
     log_every_seconds: float = param(2.0, "how often the driver gathers metrics, logs and prints progress", gt=0)
     plot_every_seconds: float = param(30.0, "how often the learning-curve PNG is redrawn", gt=0)
 

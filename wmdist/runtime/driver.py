@@ -224,6 +224,10 @@ class Driver:
                     self.tick()
                 if self._budget_done() and self.stop_reason is None:
                     self.stop_reason = ("done", "budget reached")
+                target = self.cfg.run.stop_at_eval_return
+                if target is not None and self.eval_return is not None and self.eval_return >= target \
+                        and self.stop_reason is None:
+                    self.stop_reason = ("done", f"eval return {self.eval_return:.4g} reached {target:g}")
         except KeyboardInterrupt:
             self.stop_reason = ("interrupted", "interrupted by the user")
         status, message = self.stop_reason
