@@ -73,3 +73,11 @@ def test_preset_runs_and_its_loss_falls(ray_session, tmp_path, preset):
     n = max(1, len(losses) // 3)
     head, tail = np.mean(losses[:n]), np.mean(losses[-n:])
     assert tail < head, f"{preset}: {key} did not fall: {losses}"
+
+
+@pytest.mark.parametrize("preset", PRESETS)
+def test_preset_fits_the_default_two_cpu_machine(preset):
+    """`wmdist train configs/X.yaml` on a 2-core laptop must not be refused for CPUs."""
+    from wmdist.runtime.resources import check_fits
+
+    check_fits(load_config(str(CONFIGS / preset)), {"CPU": 2.0})
