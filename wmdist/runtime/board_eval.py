@@ -36,7 +36,7 @@ def play_board(policy: Policy, env: BoardEnv, agent_player: int, opponent: Oppon
             action = opponent(env.state)
         _, reward, terminated, _ = env.step(action)
         if terminated:
-            return float(reward if mover == agent_player else -reward)
+            return float(reward if mover == agent_player else -reward) + 0.0  # + 0.0: no -0.0 draws
 
 
 def default_opponent(env: BoardEnv, seed: int) -> Opponent:

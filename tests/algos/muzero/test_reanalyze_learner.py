@@ -28,7 +28,7 @@ def _algo(spec=SPEC, **kw):
 
 def test_reanalyze_with_the_same_weights_reproduces_greedy_search():
     env = EnvConfig(id="gym:CartPole-v1")
-    algo = _algo(env_spec(env))
+    algo = _algo(env_spec(env), reanalyze_noise=False)
     loop = InProcessLoop(algo, env, num_envs=4, seq_len=12, overlap=2)
     loop.learner.update(random_batch(np.random.default_rng(0), 8, 12, 2, obs_dim=4))  # non-trivial weights
     loop.policy.set_weights(loop.learner.get_weights(), 1)
@@ -46,6 +46,26 @@ def test_reanalyze_with_the_same_weights_reproduces_greedy_search():
     loop.learner.update(random_batch(np.random.default_rng(1), 8, 12, 2, obs_dim=4))
     re.set_weights(loop.learner.get_weights(), 2)
     assert not np.allclose(re.reanalyze(batch)["search_value"][acting], batch["search_value"][acting])
+
+
+def test_reanalyze_noise_keeps_every_legal_action_in_the_targets_of_a_peaked_prior():
+    """A prior that puts ~all mass on one action: without noise the search never tries the
+    others, so the target is one-hot; with self-play's root noise the others get visits."""
+    env = EnvConfig(id="gym:CartPole-v1")
+    targets = {}
+    for noise in (False, True):
+        algo = _algo(env_spec(env), reanalyze_noise=noise)
+        loop = InProcessLoop(algo, env, num_envs=4, seq_len=12, overlap=2)
+        loop.collect(15, explore=False)
+        batch = loop.sample(6)
+        re = algo.make_reanalyzer()
+        weights = loop.learner.get_weights()
+        weights["policy_head.2.bias"] = weights["policy_head.2.bias"] + np.array([30.0, 0.0], np.float32)  # prior ~ [1, 0]
+        re.set_weights(weights, 1)
+        acting = batch["mask"] & ~batch["last"]
+        targets[noise] = re.reanalyze(batch)["search_policy"][acting]  # [N, A]
+    assert (targets[False][:, 1] == 0).all()  # collapsed: action 1 never searched
+    assert (targets[True][:, 1] > 0).mean() > 0.2
 
 
 def test_learner_checkpoint_round_trip_is_exact():

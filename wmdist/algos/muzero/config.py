@@ -41,6 +41,8 @@ class MuZeroConfig:
     dynamics_grad_scale: float = param(0.5, "gradient scale at the dynamics input (paper: 1/2)", ge=0, le=1)
     priority_eps: float = param(1e-6, "added to |value error| so every sample keeps a chance", gt=0)
     bf16: bool = param(False, "run the learner's forward pass under CPU bfloat16 autocast")
+    reanalyze_noise: bool = param(True, "Dirichlet root noise in reanalyze searches, as in self-play (EfficientZero does "
+                                        "this); without it a peaked prior can take every visit and the targets collapse")
     augment_symmetries: bool = param(False, "board games: train each sample on a random rotation/reflection of the board "
                                             "(AlphaGo Zero's augmentation; not in the MuZero paper)")
 

@@ -45,8 +45,10 @@ class MuZeroReanalyzer(Reanalyzer):
             rr, cc = r[lo:lo + self.max_roots], c[lo:lo + self.max_roots]
             legal = batch["legal"][rr, cc].astype(bool) if "legal" in batch else np.ones((len(rr), a), bool)
             to_play = batch["to_play"][rr, cc].astype(np.int64) if self.two_player and "to_play" in batch else None
-            # No root noise: these are training targets, not exploration.
-            res = self.searcher.run(batch["obs"][rr, cc], legal, to_play, self.rng, add_noise=False)
+            # Root noise as in self-play (reanalyze_noise): the stored targets came from noised
+            # searches too, and a noise-free search on a peaked prior can put every visit on one
+            # action, so the policy target sharpens the prior further until it collapses.
+            res = self.searcher.run(batch["obs"][rr, cc], legal, to_play, self.rng, add_noise=self.cfg.reanalyze_noise)
             policy[rr, cc] = res.policy_target
             value[rr, cc] = res.root_value
         return {"search_policy": policy, "search_value": value}
