@@ -39,3 +39,30 @@ def test_eval_of_a_folder_without_checkpoint_is_one_line(tmp_path, capsys):
     assert main(["eval", str(tmp_path)]) == 2
     err = capsys.readouterr().err
     assert "not a wmdist run directory" in err and err.count("\n") == 1
+
+
+def test_board_bench_plays_the_solver_and_plots_losses(tmp_path, capsys):
+    import json
+
+    from wmdist.bench.board import main as board_main
+    from wmdist.envs.factory import env_spec
+    from wmdist.runtime.roles import build_algorithm
+
+    preset = Path(__file__).parents[2] / "configs" / "muzero_tictactoe.yaml"
+    cfg = load_config(str(preset), [f"run.dir={tmp_path}", "algo.search.num_simulations=4", "algo.hidden=[8]",
+                                    "algo.latent_dim=8"])
+    run_dir = tmp_path / "ttt"
+    run_dir.mkdir()
+    (run_dir / "config.yaml").write_text(dump_yaml(cfg))
+    weights = build_algorithm(cfg, env_spec(cfg.env), 0).make_learner().get_weights()
+    save_checkpoint(run_dir, {}, weights, 3, {"updates": 3, "env_steps": 90}, None, keep=2)
+    (run_dir / "metrics.jsonl").write_text(
+        '{"kind": "eval", "env_steps": 40, "eval_return": -0.5, "eval_min": -1}\n'
+        '{"kind": "eval", "env_steps": 90, "eval_return": -0.1, "eval_min": -1}\n')
+    png = tmp_path / "lost.png"
+    assert board_main([str(run_dir), "--games", "6", "--png", str(png)]) == 0
+    res = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert res["games"] == 6 and res["won_p0"] == res["won_p1"] == 0  # nobody beats the solver
+    assert sum(res[f"{k}_p{s}"] for k in ("won", "drew", "lost") for s in (0, 1)) == 6
+    assert res["never_loses"] == (res["lost"] == 0)
+    assert png.stat().st_size > 1000

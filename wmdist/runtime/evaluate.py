@@ -16,7 +16,7 @@ from wmdist.runtime.roles import build_algorithm
 from wmdist.runtime.train import env_spec_or_error, load_run_config
 
 
-def _load(run_dir: str):
+def load_run(run_dir: str):
     cfg = load_run_config(run_dir)
     ckpt = ck.latest_checkpoint(run_dir)
     if ckpt is None:
@@ -49,7 +49,7 @@ def _human(env, out: IO[str]) -> Callable[[object], int]:
 
 def evaluate_run(run_dir: str, episodes: int = 10, video: str | None = None, human: bool = False,
                  out: IO[str] = sys.stdout) -> int:
-    cfg, spec, algo, version, weights, ckpt = _load(run_dir)
+    cfg, spec, algo, version, weights, ckpt = load_run(run_dir)
     policy = algo.make_policy("cpu")
     policy.set_weights(weights, version)
     print(f"wmdist: {ckpt.name} (weights v{version}) on {cfg.env.id}", file=out)
@@ -101,7 +101,7 @@ def record_video(cfg, algo, weights, version: int, path: str, max_steps: int = 1
 
 
 def dream_run(run_dir: str, out: str | None = None, horizon: int = 45, stream: IO[str] = sys.stdout) -> int:
-    cfg, spec, algo, version, weights, ckpt = _load(run_dir)
+    cfg, spec, algo, version, weights, ckpt = load_run(run_dir)
     try:
         from wmdist.algos.dreamer.dream import open_loop_video
     except ImportError as err:

@@ -1,0 +1,69 @@
+"""Board-game benchmark: a trained run's agent against the exact solver.
+
+    python -m wmdist.bench.board RUN_DIR --games 200 --png docs/bench/muzero_tictactoe.png
+
+Plays `games` games with the run's latest checkpoint (half as first player, half as
+second; the solver picks a random optimal move, so games differ), prints one JSON line
+with the counts, and plots the games lost per in-training evaluation against env steps.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+from wmdist.runtime.curves import read_jsonl
+
+
+def plot_losses(metrics: Path, games_per_eval: int, png: Path, title: str) -> None:
+    """Games lost per evaluation: against a perfect opponent the mean outcome is -losses / games."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    # Evaluations against the opponent log eval_min (older runs' self-play evaluations did not).
+    ev = [r for r in read_jsonl(metrics) if r.get("kind") == "eval" and r.get("eval_min") is not None]
+    steps = [r["env_steps"] for r in ev]
+    lost = [round(-r["eval_return"] * games_per_eval) for r in ev]
+    fig, ax = plt.subplots(figsize=(7, 3.5))
+    ax.plot(steps, lost, marker=".")
+    ax.set_xlabel("env steps")
+    ax.set_ylabel(f"games lost of {games_per_eval}")
+    ax.set_title(title)
+    ax.grid(alpha=0.3)
+    png.parent.mkdir(parents=True, exist_ok=True)
+    fig.tight_layout()
+    fig.savefig(png, dpi=90)
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("run_dir")
+    p.add_argument("--games", type=int, default=200)
+    p.add_argument("--png", default=None)
+    a = p.parse_args(argv)
+    from wmdist.envs.factory import make_env
+    from wmdist.runtime.board_eval import default_opponent, play_games, summary
+    from wmdist.runtime.evaluate import load_run
+
+    cfg, spec, algo, version, weights, ckpt = load_run(a.run_dir)
+    if spec.players != 2:
+        print(f"wmdist: {a.run_dir} is not a board-game run", file=sys.stderr)
+        return 2
+    policy = algo.make_policy("cpu")
+    policy.set_weights(weights, version)
+    env = make_env(cfg.env, cfg.run.seed)
+    counts = summary(play_games(policy, env, a.games, default_opponent(env, cfg.run.seed + 1)))
+    lost = counts["lost_p0"] + counts["lost_p1"]
+    print(json.dumps({"env": cfg.env.id, "checkpoint": ckpt.name, "weights_version": version, "games": a.games,
+                      **counts, "lost": lost, "never_loses": lost == 0}), flush=True)
+    if a.png:
+        plot_losses(Path(a.run_dir) / "metrics.jsonl", cfg.eval.episodes, Path(a.png),
+                    f"{cfg.env.id}: games lost to the exact solver per evaluation")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
