@@ -1,4 +1,5 @@
-"""The batched search loop: validation, tree allocation, one recurrent_fn call per simulation."""
+"""The batched search loop: validation, one recurrent_fn call + one kernel call per
+simulation, outputs. The tree buffers come from a per-thread cache (`workspace.py`)."""
 from __future__ import annotations
 
 from typing import Any
@@ -8,28 +9,18 @@ import numpy as np
 from wmdist.search import kernels as K
 from wmdist.search import layout as L
 from wmdist.search.api import RecurrentFn, SearchConfig, SearchOutput
-from wmdist.search.latents import LatentStore
-from wmdist.search.noise import considered_visit_table, sample_root_noise
+from wmdist.search.noise import considered_visit_table, draw_root_noise
+from wmdist.search.workspace import Workspace, acquire
 
 
-_F64 = np.dtype(np.float64)
-
-
-def _as_float(x: Any, shape: tuple[int, ...], what: str, out: np.ndarray | None = None) -> np.ndarray:
-    """x as a C-contiguous float64 array of `shape`: x itself if it already is one, else a
-    converted copy (into `out` if given: no allocation per simulation)."""
-    if type(x) is np.ndarray and x.dtype is _F64 and x.shape == shape and x.flags.c_contiguous:
-        return x
+def _as_float(x: Any, shape: tuple[int, ...], what: str) -> np.ndarray:
+    """x as a C-contiguous float64 array of `shape`, or a ValueError naming `what`."""
     if np.shape(x) != shape:
         raise ValueError(f"{what} must have shape {shape}, got {np.shape(x)}")
-    if out is None:
-        return np.ascontiguousarray(x, dtype=np.float64)
-    np.copyto(out, x, casting="same_kind")
-    return out
+    return np.ascontiguousarray(x, dtype=np.float64)
 
 
-def _params(config: SearchConfig, two_player: bool, add_noise: bool) -> np.ndarray:
-    p = np.zeros(L.NUM_PARAMS)
+def _write_params(p: np.ndarray, config: SearchConfig, two_player: bool, add_noise: bool) -> None:
     p[L.P_C1] = config.c1
     p[L.P_C2] = config.c2
     p[L.P_GAMMA_SIGN] = config.discount * (-1.0 if two_player else 1.0)
@@ -42,7 +33,6 @@ def _params(config: SearchConfig, two_player: bool, add_noise: bool) -> np.ndarr
     p[L.P_MAX_CONSIDERED] = config.gumbel_max_considered
     use_dirichlet = add_noise and not config.gumbel
     p[L.P_NOISE_FRACTION] = config.dirichlet_fraction if use_dirichlet else 0.0
-    return p
 
 
 def visit_policy(visit_counts: np.ndarray, legal: np.ndarray, temperature: float) -> np.ndarray:
@@ -64,21 +54,58 @@ def sample_actions(policy: np.ndarray, rng: np.random.Generator) -> np.ndarray:
     return np.minimum((cdf < x[:, None]).sum(axis=1), policy.shape[1] - 1)
 
 
-def _check_inputs(root_logits: np.ndarray, root_value: Any, legal: Any, to_play: Any, temperature: float):
-    if root_logits.ndim != 2 or root_logits.shape[0] < 1 or root_logits.shape[1] < 1:
-        raise ValueError(f"root_logits must have shape [B, A] with B, A >= 1, got {root_logits.shape}")
-    batch, num_actions = root_logits.shape
-    value = _as_float(root_value, (batch,), "root_value")
+def _check_inputs(root_logits: Any, root_value: Any, legal: Any, to_play: Any, temperature: float):
+    """Shapes and kinds of the inputs (finiteness and 'a legal action per row' are checked
+    by the init kernel); returns (logits [B, A], value [B], legal [B, A]) as numpy arrays."""
+    logits = _as_array(root_logits)
+    if logits.ndim != 2 or logits.shape[0] < 1 or logits.shape[1] < 1:
+        raise ValueError(f"root_logits must have shape [B, A] with B, A >= 1, got {logits.shape}")
+    batch, num_actions = logits.shape
+    value = _as_array(root_value)
+    if value.shape != (batch,):
+        raise ValueError(f"root_value must have shape {(batch,)}, got {value.shape}")
     legal = np.asarray(legal)
     if legal.shape != (batch, num_actions) or legal.dtype != np.bool_:
         raise ValueError(f"legal must be a bool array of shape {(batch, num_actions)}, got {legal.dtype} {legal.shape}")
-    if not legal.any(axis=1).all():
-        raise ValueError("every root needs at least one legal action")
     if to_play is not None and np.shape(to_play) != (batch,):
         raise ValueError(f"to_play must have shape ({batch},), got {np.shape(to_play)}")
     if not temperature >= 0:
         raise ValueError(f"temperature must be >= 0, got {temperature}")
-    return value, np.ascontiguousarray(legal)
+    return logits, value, legal
+
+
+def _as_array(x: Any) -> np.ndarray:
+    """x itself if it is a float32/float64 numpy array (the kernels read both), else float64."""
+    if type(x) is np.ndarray and x.dtype.char in "fd":
+        return x
+    return np.asarray(x, dtype=np.float64)
+
+
+def _model_outputs(out: Any, batch: int, num_actions: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, Any]:
+    """recurrent_fn's (reward, value, logits, latents) with the arrays as the kernel reads
+    them: float32/float64 numpy arrays of the right rank (shapes are checked in the kernel)."""
+    reward, value, logits, latents = out
+    if not (type(reward) is np.ndarray and reward.ndim == 1 and reward.dtype.char in "fd"):
+        reward = _as_float(reward, (batch,), "recurrent_fn reward")
+    if not (type(value) is np.ndarray and value.ndim == 1 and value.dtype.char in "fd"):
+        value = _as_float(value, (batch,), "recurrent_fn value")
+    if not (type(logits) is np.ndarray and logits.ndim == 2 and logits.dtype.char in "fd"):
+        logits = _as_float(logits, (batch, num_actions), "recurrent_fn logits")
+    return reward, value, logits, latents
+
+
+def _raise_for(status: int, simulation: int, reward: np.ndarray, value: np.ndarray, logits: np.ndarray,
+               batch: int, num_actions: int) -> None:
+    """The ValueError for a kernel's failure status on recurrent_fn's outputs."""
+    if status == L.BAD_SHAPE:
+        for x, shape, what in ((reward, (batch,), "reward"), (value, (batch,), "value"),
+                               (logits, (batch, num_actions), "logits")):
+            _as_float(x, shape, f"recurrent_fn {what}")
+    raise ValueError(f"recurrent_fn returned non-finite reward, value or logits at simulation {simulation}")
+
+
+_NO_DRAWS = np.zeros((0, 0))
+_NO_UNIFORMS = np.zeros(0)
 
 
 def run_search(
@@ -95,65 +122,53 @@ def run_search(
     two_player: bool = False,
 ) -> SearchOutput:
     """See `wmdist.search.api.search`."""
-    logits = np.ascontiguousarray(np.asarray(root_logits, dtype=np.float64))
-    value, legal = _check_inputs(logits, root_value, legal, to_play, temperature)
+    logits, value, legal = _check_inputs(root_logits, root_value, legal, to_play, temperature)
     batch, num_actions = logits.shape
     sims = config.num_simulations
-    num_nodes = sims + 1
-    dirichlet, gumbel = sample_root_noise(rng, legal, config.dirichlet_alpha, config.gumbel, add_noise)
-
-    nodes_f = np.zeros((batch, num_nodes, 4))
-    nodes_i = np.zeros((batch, num_nodes, 5), dtype=np.int32)
-    children = np.full((batch, num_nodes, num_actions), -1, dtype=np.int32)
-    edges_f = np.zeros((batch, num_nodes, 4, num_actions))
-    minmax = np.empty((batch, 2))
-    minmax[:, 0], minmax[:, 1] = np.inf, -np.inf
+    draws = draw_root_noise(rng, batch, num_actions, config.dirichlet_alpha, config.gumbel, add_noise)
     table = considered_visit_table(config.gumbel_max_considered, sims)
-    params = _params(config, two_player, add_noise)
-    sel = np.zeros((3, batch), dtype=np.int64)  # pending leaf per row: parent, action, reset
-    store = LatentStore(root_latent, batch, num_nodes)
-    tree = (nodes_f, nodes_i, children, edges_f, legal, gumbel, minmax, table, params)
+    ws = acquire(batch, num_actions, table, root_latent)
+    try:
+        _write_params(ws.params, config, two_player, add_noise)
+        _run_simulations(ws, logits, value, legal, _NO_DRAWS if draws is None else draws, recurrent_fn,
+                         sims, config.value_prefix)
+        visit_counts = np.empty((batch, num_actions), dtype=np.int64)
+        policy = np.empty((batch, num_actions), dtype=np.float32)
+        action = np.empty(batch, dtype=np.int64)
+        search_value = np.empty(batch, dtype=np.float32)
+        q_values = np.empty((batch, num_actions), dtype=np.float32)
+        sampled = not config.gumbel and temperature > 0
+        uniforms = rng.random(batch) if sampled else _NO_UNIFORMS  # the draws of sample_actions
+        K.finish(ws.tree_f, ws.tree_i, float(temperature), uniforms, visit_counts, policy, action, search_value,
+                 q_values)
+    finally:
+        ws.release()
+    return SearchOutput(visit_counts=visit_counts, policy=policy, action=action, root_value=search_value,
+                        q_values=q_values)
 
-    status = K.init_roots(*tree, logits, value, dirichlet, store.store, store.staged, store.gathered, sel)
+
+def _run_simulations(ws: Workspace, logits: np.ndarray, value: np.ndarray, legal: np.ndarray, draws: np.ndarray,
+                     recurrent_fn: RecurrentFn, sims: int, value_prefix: bool) -> None:
+    """Expand the roots, then `sims` x (one recurrent_fn call + one kernel call)."""
+    tree_f, tree_i, sel, store, io = ws.tree_f, ws.tree_i, ws.sel, ws.latents.store, ws.latents.io
+    status = K.init_roots(tree_f, tree_i, sel, store, io, logits, value, legal, draws)
+    if status == L.NO_LEGAL:
+        raise ValueError("every root needs at least one legal action")
     if status != L.OK:
         raise ValueError("root_logits and root_value must be finite")
+    batch, num_actions = logits.shape
     actions = sel[L.SEL_ACTION]  # view: the kernels update it in place
     reset = sel[L.SEL_RESET]
-    # Hot loop: one model call + one kernel call per simulation; names bound locally.
-    step, stage, latents_in = K.expand_backup_select, store.stage, store.gathered_latents
-    row_shape, logits_shape = (batch,), (batch, num_actions)
-    reward_buf, value_buf, logits_buf = np.empty(batch), np.empty(batch), np.empty(logits_shape)
+    # Hot loop: everything bound to locals; the kernel checks shapes and finiteness.
+    step, outputs = K.expand_backup_select, _model_outputs
+    stage, latents_in = ws.latents.stage, ws.latents.gathered_latents
     for s in range(sims):
-        if config.value_prefix:
-            out = recurrent_fn(latents_in, actions, reset.astype(bool))
+        if value_prefix:
+            out = recurrent_fn(latents_in, actions, reset != 0)
         else:
             out = recurrent_fn(latents_in, actions)
-        reward, leaf_value, leaf_logits, next_latents = out
-        reward = _as_float(reward, row_shape, "recurrent_fn reward", reward_buf)
-        leaf_value = _as_float(leaf_value, row_shape, "recurrent_fn value", value_buf)
-        leaf_logits = _as_float(leaf_logits, logits_shape, "recurrent_fn logits", logits_buf)
+        reward, leaf_value, leaf_logits, next_latents = outputs(out, batch, num_actions)
         stage(next_latents)
-        status = step(*tree, s + 1, reward, leaf_value, leaf_logits, store.store, store.staged, store.gathered,
-                      sel, s + 1 < sims)
+        status = step(tree_f, tree_i, sel, store, io, reward, leaf_value, leaf_logits, s + 1, s + 1 < sims)
         if status != L.OK:
-            raise ValueError(f"recurrent_fn returned non-finite reward, value or logits at simulation {s}")
-
-    visit_counts = np.zeros((batch, num_actions), dtype=np.int64)
-    q_values = np.zeros((batch, num_actions))
-    improved = np.zeros((batch, num_actions))
-    gumbel_action = np.zeros(batch, dtype=np.int64)
-    search_value = np.zeros(batch)
-    K.root_statistics(nodes_f, nodes_i, children, edges_f, legal, gumbel, params,
-                      visit_counts, q_values, improved, gumbel_action, search_value)
-    if config.gumbel:
-        policy, action = improved, gumbel_action
-    else:
-        policy = visit_policy(visit_counts, legal, temperature)
-        action = policy.argmax(axis=1) if temperature == 0 else sample_actions(policy, rng)
-    return SearchOutput(
-        visit_counts=visit_counts,
-        policy=policy.astype(np.float32),
-        action=action.astype(np.int64),
-        root_value=search_value.astype(np.float32),
-        q_values=q_values.astype(np.float32),
-    )
+            _raise_for(status, s, reward, leaf_value, leaf_logits, batch, num_actions)

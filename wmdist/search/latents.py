@@ -3,9 +3,9 @@
 Leaves (numpy arrays or CPU torch tensors, leading dim B) are packed side by side into a
 row of W 8-byte words (each leaf's slot 8-byte aligned). The numba kernels copy rows in and
 out by node index as uint64 words, so one simulation costs two row copies per batch row
-whatever the dtype, and
-`recurrent_fn` receives numpy / torch views of the gathered rows (torch via from_numpy,
-zero-copy) in the same nested tuple/list structure as the root latents.
+whatever the dtype, and `recurrent_fn` receives numpy / torch views of the gathered rows
+(torch via from_numpy, zero-copy) in the same nested tuple/list structure as the root
+latents. A store is reused by later searches with the same latent signature.
 """
 from __future__ import annotations
 
@@ -13,6 +13,8 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+
+from wmdist.search.layout import GATHERED, STAGED
 
 try:  # torch is a project dependency, but search works on numpy alone
     import torch
@@ -80,6 +82,21 @@ def _numpy_dtype(leaf: Any) -> np.dtype:
         raise ValueError(f"latent tensor dtype {leaf.dtype} has no numpy equivalent") from exc
 
 
+def signature(latents: Any) -> tuple:
+    """Hashable description of a latent structure (kinds, dtypes, shapes): equal signatures
+    can share one LatentStore."""
+    leaves, spec = _flatten(latents)
+    return _frozen(spec), tuple((_is_tensor(x), x.dtype, tuple(x.shape)) for x in leaves)
+
+
+def _frozen(spec: Any) -> Any:
+    """The structure spec with its lists turned into tuples (hashable)."""
+    if spec is None:
+        return None
+    kind, child_specs = spec
+    return kind, tuple(_frozen(c) for c in child_specs)
+
+
 class LatentStore:
     """Byte rows of every node's latent for B trees of `num_nodes` nodes."""
 
@@ -100,13 +117,18 @@ class LatentStore:
         words = max(offset, 8) // 8
         self._slots = slots
         self.store = np.zeros((batch, num_nodes, words), dtype=np.uint64)  # [B, N, W]
-        self.staged = np.zeros((batch, words), dtype=np.uint64)  # [B, W] incoming latents
-        self.gathered = np.zeros((batch, words), dtype=np.uint64)  # [B, W] parents' latents
-        # Staging views are numpy even for torch leaves: np.copyto from `leaf.numpy()` is
-        # several times cheaper than torch's copy_ (and needs no no_grad context).
-        self._staged_views = [self._typed_view(self.staged, s, as_torch=False) for s in slots]
-        gathered_leaves = [self._typed_view(self.gathered, s) for s in slots]
+        self.io = np.zeros((2, batch, words), dtype=np.uint64)  # [2, B, W]: staged, gathered
+        self._staged_views = [self._typed_view(self.io[STAGED], s, as_torch=False) for s in slots]
+        gathered_leaves = [self._typed_view(self.io[GATHERED], s) for s in slots]
         self.gathered_latents, _ = _unflatten(self._spec, gathered_leaves)
+        # One leaf (the common case): stage() copies it without flattening, into a torch
+        # view for torch leaves (Tensor.copy_ beats np.copyto(view, leaf.numpy()), whose
+        # .numpy() alone costs microseconds) or a numpy view for numpy leaves.
+        self._one = None
+        if self._spec is None:
+            leaf = leaves[0]
+            dst = self._typed_view(self.io[STAGED], slots[0])
+            self._one = (dst, leaf.dtype, tuple(leaf.shape))
         self.stage(root_latents)
 
     @staticmethod
@@ -119,12 +141,18 @@ class LatentStore:
 
     def stage(self, latents: Any) -> None:
         """Copy `latents` (same structure, shapes and kinds as the roots) into the staging row."""
-        if self._spec is None and (type(latents) is np.ndarray) != self._slots[0].is_torch:
-            view = self._staged_views[0]  # fast path: one leaf of the root's kind
-            if latents.shape != view.shape:
-                raise ValueError(f"latent shape {tuple(latents.shape)} differs from the root's {view.shape}")
-            np.copyto(view, latents if type(latents) is np.ndarray else _tensor_to_numpy(latents), casting="same_kind")
-            return
+        one = self._one
+        try:
+            if one is not None and latents.dtype is one[1] and latents.shape == one[2]:
+                if self._slots[0].is_torch:
+                    if not latents.requires_grad:  # a grad-tracking copy_ would build a graph
+                        one[0].copy_(latents)
+                        return
+                else:
+                    one[0][...] = latents
+                    return
+        except AttributeError:  # not an array: the checks below say what is wrong
+            pass
         leaves, _ = _flatten(latents)
         if len(leaves) != len(self._slots):
             raise ValueError(f"recurrent_fn returned {len(leaves)} latent leaves, expected {len(self._slots)}")

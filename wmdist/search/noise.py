@@ -5,29 +5,66 @@ import functools
 import math
 
 import numpy as np
+from numba import njit
+
+
+def draw_root_noise(
+    rng: np.random.Generator, batch: int, num_actions: int, alpha: float, gumbel: bool, add_noise: bool
+) -> np.ndarray | None:
+    """The root noise's random draws [B, A] float64, or None without noise.
+
+    pUCT: Gamma(alpha, 1) variables for every (row, action), turned into the Dirichlet by
+    `dirichlet_row` (a Dirichlet is normalised Gammas). Gumbel mode: Gumbel(0, 1). One
+    draw of the whole batch, so a seed fixes the noise of every row.
+    """
+    if not add_noise:
+        return None
+    if gumbel:
+        return rng.gumbel(size=(batch, num_actions))
+    return rng.gamma(alpha, size=(batch, num_actions))
+
+
+@njit(cache=True, error_model="numpy")
+def dirichlet_row(gammas, legal, out):
+    """out [A] = Dirichlet sample over the legal actions (legal != 0) from one row of Gammas.
+
+    Tiny alpha can underflow every Gamma of a row to 0: the row falls back to uniform.
+    """
+    total = 0.0
+    num_legal = 0
+    for a in range(gammas.shape[0]):
+        if legal[a] != 0:
+            total += gammas[a]
+            num_legal += 1
+    for a in range(gammas.shape[0]):
+        if legal[a] == 0:
+            out[a] = 0.0
+        elif total > 0.0:
+            out[a] = gammas[a] / total
+        else:
+            out[a] = 1.0 / num_legal
 
 
 def sample_root_noise(
     rng: np.random.Generator, legal: np.ndarray, alpha: float, gumbel: bool, add_noise: bool
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Return (dirichlet [B, A], gumbel [B, A]) float64 drawn in a fixed order.
+    """Return (dirichlet [B, A], gumbel [B, A]) float64: exactly the root noise that
+    `search` uses with the same rng state (tests hand it to the reference search).
 
-    Dirichlet(alpha) over each row's legal actions (zeros elsewhere), drawn for the whole
-    batch at once as normalised Gamma(alpha, 1) variables (the Dirichlet's definition); only
-    in pUCT mode with add_noise. Gumbel(0, 1): one [B, A] draw, only in Gumbel mode with
-    add_noise. Tests rebuild the same noise from the same seed.
+    Dirichlet(alpha) over each row's legal actions (zeros elsewhere), only in pUCT mode with
+    add_noise; Gumbel(0, 1) only in Gumbel mode with add_noise; zeros otherwise.
     """
     batch, num_actions = legal.shape
+    draws = draw_root_noise(rng, batch, num_actions, alpha, gumbel, add_noise)
     zeros = np.zeros((batch, num_actions))
-    if not add_noise:
+    if draws is None:
         return zeros, zeros
     if gumbel:
-        return zeros, rng.gumbel(size=(batch, num_actions))
-    gammas = rng.gamma(alpha, size=(batch, num_actions)) * legal
-    total = gammas.sum(axis=1, keepdims=True)
-    # Tiny alpha can underflow every gamma of a row to 0: fall back to uniform there.
-    gammas = np.where(total > 0, gammas, legal.astype(np.float64))
-    return gammas / gammas.sum(axis=1, keepdims=True), zeros
+        return zeros, draws
+    dirichlet = np.zeros((batch, num_actions))
+    for b in range(batch):
+        dirichlet_row(draws[b], legal[b].astype(np.int32), dirichlet[b])
+    return dirichlet, zeros
 
 
 def considered_visit_sequence(num_considered: int, num_simulations: int) -> list[int]:

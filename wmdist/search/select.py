@@ -14,22 +14,22 @@ import numpy as np
 from numba import njit
 
 from wmdist.search.layout import (
-    EDGE_N, EDGE_Q, HAS_PRIOR, LOGIT, P_C1, P_C2, P_C_SCALE, P_C_VISIT, P_GUMBEL, P_MAX_CONSIDERED,
+    EDGE_N, EDGE_Q, LOGIT, OPENED, P_C1, P_C2, P_C_SCALE, P_C_VISIT, P_GUMBEL, P_MAX_CONSIDERED,
     P_UNVISITED_PARENT, PRIOR, RAW_VALUE, RESCALE_EPS, REWARD, VALUE_SUM, VISITS,
 )
 
 
 @njit(cache=True, error_model="numpy")
 def softmax_into(x, mask, use_mask, out):
-    """out = softmax(x) over the entries where mask (or all if not use_mask); others 0."""
+    """out = softmax(x) over the entries where mask != 0 (or all if not use_mask); others 0."""
     num = x.shape[0]
     mx = -np.inf
     for a in range(num):
-        if (not use_mask or mask[a]) and x[a] > mx:
+        if (not use_mask or mask[a] != 0) and x[a] > mx:
             mx = x[a]
     total = 0.0
     for a in range(num):
-        if not use_mask or mask[a]:
+        if not use_mask or mask[a] != 0:
             out[a] = math.exp(x[a] - mx)
             total += out[a]
         else:
@@ -76,9 +76,6 @@ def puct_select(nodes_f, nodes_i, children, edges_f, legal, minmax, params, b, n
     else:
         unvisited = 0.0
     prior = edges_f[b, node, PRIOR]
-    if nodes_i[b, node, HAS_PRIOR] == 0:  # interior prior = softmax over all actions
-        softmax_into(edges_f[b, node, LOGIT], legal[b], False, prior)
-        nodes_i[b, node, HAS_PRIOR] = 1
     edge_q = edges_f[b, node, EDGE_Q]
     edge_n = edges_f[b, node, EDGE_N]
     num = prior.shape[0]
@@ -90,7 +87,7 @@ def puct_select(nodes_f, nodes_i, children, edges_f, legal, minmax, params, b, n
     best = -np.inf
     best_a = -1
     for a in range(num):
-        if scores[a] > best and (not at_root or legal[b, a]):
+        if scores[a] > best and (not at_root or legal[b, a] != 0):
             best = scores[a]
             best_a = a
     return best_a
@@ -131,7 +128,7 @@ def completed_sigma(nodes_f, nodes_i, children, edges_f, legal, params, b, node,
     lo = np.inf
     hi = -np.inf
     for a in range(num):
-        if use_mask and not row_mask[a]:
+        if use_mask and row_mask[a] == 0:
             raw_q[a] = 0.0
             continue
         raw_q[a] = edge_q[a] if edge_n[a] > 0.0 else v_mix
@@ -140,7 +137,7 @@ def completed_sigma(nodes_f, nodes_i, children, edges_f, legal, params, b, node,
     scale = (params[P_C_VISIT] + max_n) * params[P_C_SCALE]  # sigma, Gumbel MuZero eq. 8
     span = max(hi - lo, RESCALE_EPS)
     for a in range(num):
-        if use_mask and not row_mask[a]:
+        if use_mask and row_mask[a] == 0:
             sigma[a] = 0.0
         else:
             sigma[a] = scale * ((raw_q[a] - lo) / span)
@@ -154,14 +151,14 @@ def gumbel_root_select(nodes_f, nodes_i, children, edges_f, legal, gumbel, table
     completed_sigma(nodes_f, nodes_i, children, edges_f, legal, params, b, 0, probs, raw_q, sigma)
     num_legal = 0
     for a in range(children.shape[2]):
-        if legal[b, a]:
+        if legal[b, a] != 0:
             num_legal += 1
     m = min(int(params[P_MAX_CONSIDERED]), num_legal)
     target = table[m, nodes_i[b, 0, VISITS] - 1]  # root visits - 1 = simulations done
     best = -np.inf
     best_a = -1
     for a in range(children.shape[2]):
-        if not legal[b, a] or edges_f[b, 0, EDGE_N, a] != target:
+        if legal[b, a] == 0 or edges_f[b, 0, EDGE_N, a] != target:
             continue
         score = gumbel[b, a] + edges_f[b, 0, LOGIT, a] + sigma[a]
         if score > best:
@@ -195,10 +192,25 @@ def gumbel_interior_select(nodes_f, nodes_i, children, edges_f, legal, params, b
 
 
 @njit(cache=True, error_model="numpy")
+def open_node(nodes_i, children, edges_f, legal, params, b, node):
+    """First pass of selection through `node`: no children, no edge visits yet, and in pUCT
+    mode the prior = softmax of the logits over all actions (interior nodes: no mask)."""
+    for a in range(children.shape[2]):
+        children[b, node, a] = -1
+        edges_f[b, node, EDGE_Q, a] = 0.0
+        edges_f[b, node, EDGE_N, a] = 0.0
+    if params[P_GUMBEL] == 0.0:
+        softmax_into(edges_f[b, node, LOGIT], legal[b], False, edges_f[b, node, PRIOR])
+    nodes_i[b, node, OPENED] = 1
+
+
+@njit(cache=True, error_model="numpy")
 def select_leaf(nodes_f, nodes_i, children, edges_f, legal, gumbel, minmax, table, params, b, scratch):
     """Descend from the root to an unexpanded edge; return (parent node, action)."""
     node = 0
     while True:
+        if nodes_i[b, node, OPENED] == 0:
+            open_node(nodes_i, children, edges_f, legal, params, b, node)
         if params[P_GUMBEL] != 0.0:
             if node == 0:
                 a = gumbel_root_select(nodes_f, nodes_i, children, edges_f, legal, gumbel, table, params, b, scratch)
