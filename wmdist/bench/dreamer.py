@@ -4,7 +4,9 @@ Model: units 256, GRU 256, 32 x 32 latents, 2-layer MLPs; batch 16 x 64; imagina
 H = 15 from all 1024 posterior states. Two action kinds: discrete (REINFORCE, dynamics run
 without autograd) and continuous (gradients through the dynamics). Each case also reports
 where the time goes (world model / imagination / actor / critic, from a wall-clock split
-of one update) and the top ops of a torch.profiler run.
+of one update) and the top ops of a torch.profiler run. Further cases: the CartPole
+preset's model (units/GRU 128, batch 16 x 32), and the two-hot loss + mean as gathered
+bins against the dense reference, timed side by side.
 """
 from __future__ import annotations
 
@@ -99,6 +101,34 @@ def _update_flops(learner, batch) -> float:
     return counter.get_total_flops()
 
 
+def _twohot_case(n: int = 7680, reps: int = 5) -> dict:
+    """Critic-sized two-hot loss (forward + backward): gathered bins vs the dense target."""
+    from wmdist.nets.dists import symlog, twohot_bins, twohot_encode, twohot_loss
+
+    bins = twohot_bins()
+    g = torch.Generator().manual_seed(0)
+    logits = torch.randn(n, len(bins), generator=g, requires_grad=True)
+    y = torch.randn(n, generator=g) * 30
+
+    def dense():
+        loss = -(twohot_encode(symlog(y), bins) * torch.log_softmax(logits, -1)).sum(-1)
+        loss.mean().backward()
+
+    def ours():
+        twohot_loss(logits, y, bins).mean().backward()
+
+    times = {"dense": 0.0, "ours": 0.0}
+    dense(), ours()  # warm-up
+    for _ in range(reps):  # interleaved, so load changes hit both alike
+        for name, fn in (("dense", dense), ("ours", ours)):
+            t0 = time.perf_counter()
+            fn()
+            times[name] += time.perf_counter() - t0
+    return {"case": "twohot_loss_vs_dense", "rows": n, "bins": len(bins),
+            "dense_ms": round(1e3 * times["dense"] / reps, 2), "ours_ms": round(1e3 * times["ours"] / reps, 2),
+            "speedup": round(times["dense"] / times["ours"], 2)}
+
+
 def _time_updates(learner, batch, updates: int) -> float:
     learner.update(batch)  # warm-up
     t0 = time.perf_counter()
@@ -133,6 +163,17 @@ def run(quick: bool = False) -> Iterator[dict]:
             "phase_seconds": {k: round(v, 3) for k, v in split.items()},
             "top_ops": [] if quick else _top_ops(learner, batch),
         }
+    # the CartPole preset's model and batch (what `configs/dreamerv3_cartpole.yaml` trains)
+    spec = bench_spec(True)
+    cfg = DreamerConfig(version=3, deter=128, units=128, mlp_layers=2, stoch=32, classes=32)
+    learner = Dreamer(spec, cfg).make_learner()
+    pb, pt = (4, 16) if quick else (16, 32)
+    batch = random_batch(spec, pb, pt)
+    dt = _time_updates(learner, batch, updates)
+    yield {"case": "v3_cartpole_preset_discrete_fp32", "units": 128, "deter": 128, "batch": f"{pb}x{pt}",
+           "threads": threads, "updates_per_s": round(1.0 / dt, 3), "seconds_per_update": round(dt, 3),
+           "phase_seconds": {k: round(v, 3) for k, v in _split(learner, batch).items()}}
+    yield _twohot_case(1024 if quick else 7680)
     # bf16 autocast vs fp32, side by side at a reduced batch
     sb, st = 2, 16
     spec = bench_spec(True)

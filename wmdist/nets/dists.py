@@ -45,15 +45,29 @@ def twohot_encode(y: torch.Tensor, bins: torch.Tensor) -> torch.Tensor:
     return out
 
 
+def twohot_nll(logp: torch.Tensor, y: torch.Tensor, bins: torch.Tensor) -> torch.Tensor:
+    """-log-likelihood of two-hot(symlog(y)) under log-probs [..., K]; returns [...].
+
+    Reads only the two bins that carry the target's mass (a gather), instead of building
+    the dense [..., K] target and a K-wide product: same value as
+    `-(twohot_encode(symlog(y), bins) * logp).sum(-1)`.
+    """
+    v = symlog(y.float()).clamp(bins[0], bins[-1])
+    k = torch.bucketize(v, bins, right=True).clamp(1, len(bins) - 1).unsqueeze(-1)  # upper bin [..., 1]
+    lo, hi = bins[k - 1], bins[k]
+    w_hi = (v.unsqueeze(-1) - lo) / (hi - lo)
+    pair = torch.cat([logp.gather(-1, k - 1), logp.gather(-1, k)], -1)  # [..., 2]
+    return -(pair[..., 0] * (1 - w_hi[..., 0]) + pair[..., 1] * w_hi[..., 0])
+
+
 def twohot_loss(logits: torch.Tensor, y: torch.Tensor, bins: torch.Tensor) -> torch.Tensor:
     """Cross-entropy of logits [..., K] against two-hot(symlog(y)); returns [...]."""
-    target = twohot_encode(symlog(y), bins)
-    return -(target * F.log_softmax(logits.float(), -1)).sum(-1)
+    return twohot_nll(F.log_softmax(logits.float(), -1), y, bins)
 
 
 def twohot_mean(logits: torch.Tensor, bins: torch.Tensor) -> torch.Tensor:
     """Expected value under the bin distribution, mapped back with symexp: [..., K] -> [...]."""
-    return symexp((F.softmax(logits.float(), -1) * bins).sum(-1))
+    return symexp((F.softmax(logits.float(), -1) * bins).sum(-1))  # (measured: faster than `@ bins` here)
 
 
 def unimix_logits(logits: torch.Tensor, mix: float) -> torch.Tensor:

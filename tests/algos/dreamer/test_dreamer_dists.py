@@ -1,10 +1,11 @@
 """symlog/symexp, two-hot golden values, unimix and straight-through gradients."""
+import pytest
 import torch
 
-from wmdist.algos.dreamer.layers import Latent, SplitLinear
+from wmdist.algos.dreamer.layers import _DENSE_ROWS, Latent, SplitLinear
 from wmdist.nets.dists import (
     sample_index_from_probs, straight_through_onehot, symexp, symlog, twohot_bins, twohot_encode, twohot_loss,
-    twohot_mean, unimix_logits,
+    twohot_mean, twohot_nll, unimix_logits,
 )
 
 
@@ -64,9 +65,11 @@ def test_straight_through_gradient_is_identity_to_probs():
     torch.testing.assert_close(probs.grad, w)  # d(onehot + p - sg(p))/dp = 1
 
 
-def test_embedding_bag_linear_matches_dense_values_and_gradients():
+@pytest.mark.parametrize("n", [7, 200])  # below and above layers._DENSE_ROWS: both code paths
+def test_embedding_bag_linear_matches_dense_values_and_gradients(n):
+    assert (n <= _DENSE_ROWS) == (n == 7)
     torch.manual_seed(0)
-    n, s, c, d = 7, 4, 3, 5
+    s, c, d = 4, 3, 5
     lin = SplitLinear({"h": 6, "z": s * c}, d)
     probs = torch.softmax(torch.randn(n, s, c), -1).requires_grad_(True)
     idx = torch.randint(0, c, (n, s))
@@ -85,3 +88,22 @@ def test_embedding_bag_linear_matches_dense_values_and_gradients():
     for a, b in zip(grads_fast, grads_dense):
         torch.testing.assert_close(a, b)
     assert probs.grad.abs().sum() > 0
+
+
+def test_twohot_gather_loss_and_mean_match_the_dense_reference():
+    """The optimised two-hot loss (two gathered bins) and mean (a mat-vec) against the plain
+    dense formulas, values and gradients, including targets outside the support."""
+    torch.manual_seed(0)
+    bins = twohot_bins(255, -20, 20)
+    logits = torch.randn(6, 9, 255, requires_grad=True)
+    y = torch.cat([torch.randn(6, 8) * 50, torch.tensor([1e12, -1e12, 0.0, 3.0, -2.5, 1e9]).unsqueeze(-1)], -1)
+    fast = twohot_loss(logits, y, bins)
+    (g_fast,) = torch.autograd.grad((fast * torch.arange(9.0)).sum(), logits)
+    dense = -(twohot_encode(symlog(y), bins) * torch.log_softmax(logits, -1)).sum(-1)
+    (g_dense,) = torch.autograd.grad((dense * torch.arange(9.0)).sum(), logits)
+    torch.testing.assert_close(fast, dense)
+    torch.testing.assert_close(g_fast, g_dense)
+    logp = torch.log_softmax(logits.detach(), -1)
+    torch.testing.assert_close(twohot_nll(logp, y, bins), dense.detach())
+    mean_ref = symexp((torch.softmax(logits.detach(), -1) * bins).sum(-1))
+    torch.testing.assert_close(twohot_mean(logits.detach(), bins), mean_ref, rtol=1e-5, atol=1e-5)

@@ -18,7 +18,7 @@ from wmdist.algos.dreamer.kl import masked_mean
 from wmdist.algos.dreamer.layers import Latent
 from wmdist.algos.dreamer.nets import ActorCritic, WorldModel
 from wmdist.algos.dreamer.returns import PercentileNormalizer, lambda_returns
-from wmdist.nets.dists import twohot_loss, twohot_mean
+from wmdist.nets.dists import twohot_mean, twohot_nll
 
 
 @dataclass
@@ -152,14 +152,15 @@ class ActorCriticLoss:
         target = returns.detach()
         logits_h = critic_logits.reshape(H + 1, n, -1)[:-1]
         if cfg.critic_head == "twohot":
-            closs = twohot_loss(logits_h, target, self.bins)
+            logp_h = F.log_softmax(logits_h.float(), -1)  # [H, N, K], shared by both critic terms
+            closs = twohot_nll(logp_h, target, self.bins)
         else:
             closs = 0.5 * (logits_h.float().squeeze(-1) - target).pow(2)
         if cfg.slow_critic == "reg":
             with torch.no_grad():
                 slow = self._value(ac.slow_critic({"h": h_all.detach()[: H * n], "z": _rows(z_all.detach(), slice(0, H * n))})["critic"]).reshape(H, n)
             if cfg.critic_head == "twohot":
-                closs = closs + cfg.slow_reg_scale * twohot_loss(logits_h, slow, self.bins)
+                closs = closs + cfg.slow_reg_scale * twohot_nll(logp_h, slow, self.bins)
             else:
                 closs = closs + cfg.slow_reg_scale * 0.5 * (logits_h.float().squeeze(-1) - slow).pow(2)
         critic_loss = masked_mean(closs, weight)
