@@ -90,6 +90,8 @@ class RayConfig:
     num_cpus: int = param(0, "CPUs of the embedded instance (0 = all of this machine)", ge=0)
     num_gpus: int = param(-1, "GPUs of the embedded instance (-1 = detect)", ge=-1)
     object_store_mb: int = param(512, "object store size of the embedded instance in MB", ge=64)
+    worker_niceness: int = param(0, "nice level of the embedded instance's workers (Ray's default, 15, lets any other "
+                                    "process on the machine pre-empt the learner)", ge=0, le=19)
 
 
 @dataclass

@@ -42,6 +42,8 @@ def start_ray(cfg: RunConfig) -> None:
     }
     if cfg.ray.num_gpus >= 0:
         kwargs["num_gpus"] = cfg.ray.num_gpus
+    # The raylet reads this when it starts and applies it to every worker it spawns.
+    os.environ["RAY_worker_niceness"] = str(cfg.ray.worker_niceness)
     ray.init(**kwargs)
 
 
