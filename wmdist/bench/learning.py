@@ -65,6 +65,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--runs-dir", default="runs/bench")
     p.add_argument("--set", nargs="*", default=[])
     a = p.parse_args(argv)
+    for kv in a.set:  # `--set run.dir=X` would move the runs away from where they are looked for
+        if kv.startswith("run.dir="):
+            a.runs_dir = kv.split("=", 1)[1]
     runs: dict[int, Path] = {}
     results = []
     for seed in a.seeds:
