@@ -242,3 +242,26 @@ def test_run_stops_once_the_eval_return_reaches_the_target(ray_session, tmp_path
     assert train(cfg=cfg, out=out) == 0
     assert "reached -1e+06" in out.getvalue()
     assert time.monotonic() - t0 < 90  # long before the 3-minute budget
+
+
+def test_sigterm_stops_a_run_with_a_checkpoint(tmp_path):
+    """`kill` / `docker stop` end a run the way Ctrl-C does: a final checkpoint, exit status 0."""
+    import signal
+    import subprocess
+    import sys
+
+    cmd = [sys.executable, "-m", "wmdist.cli", "train", CFG, "--set", f"run.dir={tmp_path}", "run.max_minutes=5",
+           "actors.num=1", "ray.num_cpus=2"]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    lines = []
+    for line in proc.stdout:  # wait until it trains
+        lines.append(line)
+        if line.startswith("steps ") and " upd 0 " not in line:
+            break
+    proc.send_signal(signal.SIGTERM)
+    out, _ = proc.communicate(timeout=120)
+    text = "".join(lines) + out
+    assert proc.returncode == 0, text[-2000:]
+    assert "interrupted" in text
+    run_dir = next(p for p in tmp_path.iterdir() if p.is_dir())
+    assert ck.latest_checkpoint(run_dir) is not None

@@ -47,6 +47,22 @@ def env_spec_or_error(cfg: RunConfig):
         raise ConfigError(f"env.id: {err}") from None
 
 
+def _stop_on_sigterm() -> None:
+    """SIGTERM (docker stop, kill, a batch scheduler) stops the run like Ctrl-C: drain,
+    checkpoint, shut the actors down. Background shell jobs ignore SIGINT, so this is the
+    signal that reaches them."""
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        return
+
+    def interrupt(_signum, _frame):
+        raise KeyboardInterrupt
+
+    signal.signal(signal.SIGTERM, interrupt)
+
+
 def train(cfg: RunConfig | None = None, resume: str | None = None, overrides: list[str] | None = None,
           out=sys.stdout) -> int:
     """Run training; returns the process exit status."""
@@ -88,6 +104,7 @@ def train(cfg: RunConfig | None = None, resume: str | None = None, overrides: li
     telemetry = Telemetry(cfg, run_dir, out)
     driver = Driver(topo, counters, on_tick=telemetry.update, log_path=run_dir / METRICS_FILE,
                     plot=lambda: plot_learning_curve(str(run_dir / METRICS_FILE), str(run_dir / CURVE_FILE)))
+    _stop_on_sigterm()
     try:
         result = driver.run()
     finally:
