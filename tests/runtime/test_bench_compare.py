@@ -1,0 +1,34 @@
+"""`python -m wmdist.bench.compare`: steps to target per seed and per group, one plot."""
+from __future__ import annotations
+
+import json
+
+from wmdist.bench.compare import main
+
+
+def _run(folder, seed: int, evals: list[tuple[int, float]]) -> None:
+    d = folder / f"preset-seed{seed}-20261122-000000"
+    d.mkdir(parents=True)
+    lines = [{"kind": "train", "env_steps": 0}] + [{"kind": "eval", "env_steps": s, "eval_return": r} for s, r in evals]
+    (d / "metrics.jsonl").write_text("".join(json.dumps(x) + "\n" for x in lines))
+
+
+def test_compare_reports_first_crossing_per_seed_and_group_means(tmp_path, capsys):
+    _run(tmp_path / "a", 0, [(1000, 100.0), (2000, 480.0), (3000, 300.0)])
+    _run(tmp_path / "a", 1, [(1000, 200.0), (4000, 500.0)])
+    _run(tmp_path / "b", 0, [(1000, 10.0), (2000, 20.0)])
+    png = tmp_path / "cmp.png"
+    assert main(["--target", "475", "--png", str(png), f"a={tmp_path / 'a'}", f"b={tmp_path / 'b'}"]) == 0
+    rows = [json.loads(x) for x in capsys.readouterr().out.strip().splitlines()]
+    per_seed = {(r["group"], r["seed"]): r for r in rows if "seed" in r}
+    assert per_seed[("a", 0)]["env_steps_to_target"] == 2000  # the first crossing, not the last eval
+    assert per_seed[("a", 1)]["env_steps_to_target"] == 4000
+    assert not per_seed[("b", 0)]["reached"]
+    groups = {r["group"]: r for r in rows if "seed" not in r}
+    assert groups["a"]["mean_env_steps_to_target"] == 3000 and groups["b"]["reached"] == 0
+    assert png.stat().st_size > 1000
+
+
+def test_compare_rejects_a_group_without_a_folder(tmp_path, capsys):
+    assert main(["--target", "1", "--png", str(tmp_path / "x.png"), "nofolder"]) == 2
+    assert "GROUP=DIR" in capsys.readouterr().err
