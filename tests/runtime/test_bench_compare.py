@@ -9,7 +9,8 @@ from wmdist.bench.compare import main
 def _run(folder, seed: int, evals: list[tuple[int, float]]) -> None:
     d = folder / f"preset-seed{seed}-20261122-000000"
     d.mkdir(parents=True)
-    lines = [{"kind": "train", "env_steps": 0}] + [{"kind": "eval", "env_steps": s, "eval_return": r} for s, r in evals]
+    lines = [{"kind": "train", "env_steps": 0, "time": 0.0}] + [
+        {"kind": "eval", "env_steps": s, "eval_return": r, "time": s / 100} for s, r in evals]
     (d / "metrics.jsonl").write_text("".join(json.dumps(x) + "\n" for x in lines))
 
 
