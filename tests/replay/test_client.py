@@ -17,6 +17,7 @@ from replay_helpers import FIELDS, T, make_batch
 from scipy.stats import chisquare
 
 from wmdist.replay.config import ReplayConfig
+from wmdist.runtime import replay_client
 from wmdist.runtime.replay_client import ReplayClient, create_replay
 
 
@@ -173,3 +174,52 @@ def test_private_redis_and_shard_sigkill(started, tmp_path):
     d = server.dir
     c.close()
     assert server.proc is None and not any(f.endswith(".pid") for f in os.listdir(d))
+
+
+def _wait_restarted(c: ReplayClient, pid: int) -> None:
+    deadline = time.monotonic() + 60
+    while True:  # Ray restarts the actor; its __init__ rebuilds the index from redis
+        try:
+            if ray.get(c.shards[0].pid.remote(), timeout=10) != pid:
+                return
+        except Exception:
+            pass
+        assert time.monotonic() < deadline, "shard did not come back"
+        time.sleep(0.2)
+
+
+def test_redis_inserts_need_no_shard_and_survive_its_restart(started):
+    c = started(_cfg(backend="redis", shards=1, redis_appendfsync="always"), name="down")
+    assert c.insert(make_batch(3), source_id=0)
+    pid = ray.get(c.shards[0].pid.remote())
+    os.kill(pid, signal.SIGKILL)
+    # acknowledged by redis alone while the shard is dead or rebuilding: nothing waits for it
+    assert c.insert(make_batch(3, start=3), source_id=1)
+    _wait_restarted(c, pid)
+    st = c.stats()
+    assert st["size_sequences"] == 6 and st["drops_unacked"] == 0 and st["limiter_size_steps"] == 6 * T
+    assert set(_ids(c.sample(300))) == set(range(6))
+    with pytest.raises(ValueError, match="no real step"):  # refused before anything is written
+        c.insert(make_batch(1, start=9, steps=np.array([0])), source_id=2)
+
+
+def test_redis_sample_sees_own_writes_and_redraws_stale_draws(started, monkeypatch):
+    monkeypatch.setattr(replay_client, "MAX_DRAW_AGE", 600.0)  # pooled draws stay usable however slow the machine
+    c = started(_cfg(backend="redis", capacity_steps=24 * T), name="rw")  # 2 shards x 12 slots
+    other = pickle.loads(pickle.dumps(c))  # another process's client
+    assert c.insert(make_batch(6), source_id=0)
+    for _ in range(3):  # stocks the draw pools (draws for later calls in flight)
+        assert set(_ids(c.sample(8))) <= set(range(6))
+    assert c.insert(make_batch(6, start=6), source_id=1)  # this copy's write: its next sample sees it
+    assert set(_ids(c.sample(300))) == set(range(12))
+    old = c.sample(8)
+    c.sample(8)
+    for i in range(4):  # another copy evicts every sequence c's pooled draws point at
+        assert other.insert(make_batch(16, start=100 + 16 * i), source_id=7 + i)
+    assert other.stats()["size_sequences"] == 24  # a read: the shards have indexed (and evicted) by now
+    x = c.sample(64)  # pooled draws name evicted records: drawn again, not counted as corrupt
+    assert set(_ids(x)) <= set(range(100, 164)) and np.all(x.data["obs"][:, :, 1] == np.arange(T))
+    st = c.stats()
+    assert st["drops_corrupt"] == 0 and st["size_sequences"] == 24
+    assert c.update_priorities(old.keys, old.stamps, np.ones(8)) == 0  # stamps still catch stale write-backs
+    assert c.stats()["drops_stale_priority"] == 8

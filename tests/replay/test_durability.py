@@ -13,7 +13,8 @@ from wmdist.algos.base import FieldSpec
 from wmdist.replay.batch import SequenceBatch
 from wmdist.replay.redis_server import RedisServer
 from wmdist.replay.shard import ReplayShard
-from wmdist.replay.storage_redis import RecordsMissing, RedisStorage, encode_rows, new_keys, put_records
+from wmdist.replay.storage_redis import (RecordsMissing, RedisStorage, commit_records, encode_rows, new_keys,
+                                         pending_entry, put_records)
 
 
 def _redis_shard(server: RedisServer, ns: str, capacity: int = 16, sampler: str = "prioritized") -> ReplayShard:
@@ -93,6 +94,49 @@ def test_direct_insert_straddling_a_shard_restart_is_refused_not_lost(redis_serv
     put_records(redis_server.client(), dict(zip(keys, encode_rows(b, np.arange(2)))))
     assert restarted.insert_keys(keys, b.version, b.episode_id, b.mask.sum(1), lag_drops=1) == 2 * T
     assert _redis_shard(redis_server, namespace, capacity=8).stats()["size_sequences"] == 2
+
+
+def _announce(r, ns: str, batch: SequenceBatch, lag: int = 0) -> list[str]:
+    """A client's insert: the records and a pending entry in one MULTI/EXEC (acknowledged)."""
+    keys = new_keys(ns, len(batch))
+    entry = pending_entry(keys, batch.version, batch.episode_id, batch.mask.sum(1), lag)
+    commit_records(r, [(ns, dict(zip(keys, encode_rows(batch, np.arange(len(batch))))), entry)])
+    return keys
+
+
+def test_insert_acknowledged_before_indexing_survives_redis_and_shard_restart(tmp_path):
+    server = RedisServer(str(tmp_path), appendfsync="always").start()
+    try:
+        ns = "wmdist:ack:s0"
+        sh = _redis_shard(server, ns, capacity=8)
+        sh.insert(make_batch(2))  # indexed
+        _announce(server.client(), ns, make_batch(3, start=10, steps=np.array([T, 4, 1])))
+        assert sh.size_sequences == 2  # acknowledged, but the shard has not indexed it yet
+        server.kill()  # SIGKILL redis-server, then a fresh shard process: both restart
+        server.start()
+        sh2 = _redis_shard(server, ns, capacity=8)
+        st = sh2.stats()
+        assert st["size_sequences"] == 5 and st["size_steps"] == 3 * T + 5 and st["drops_unacked"] == 0
+        assert set(sh2.sample(300)["data"]["obs"][:, 0, 0].astype(int)) == {0, 1, 10, 11, 12}
+        assert server.client().llen(f"{ns}:pending") == 0
+        sh3 = _redis_shard(server, ns, capacity=8)  # indexed exactly once
+        assert sh3.stats()["size_sequences"] == 5 and np.array_equal(sh3.stamp, sh2.stamp) and sh3.count == 5
+    finally:
+        server.stop()
+
+
+def test_pending_entries_are_indexed_once_with_eviction_lag_and_bad_entries(redis_server, namespace):
+    r = redis_server.client()
+    sh = _redis_shard(redis_server, namespace, capacity=8, sampler="uniform")
+    k1 = _announce(r, namespace, make_batch(5))
+    r.rpush(f"{namespace}:pending", b"\xc1")  # a malformed entry
+    k2 = _announce(r, namespace, make_batch(6, start=5), lag=2)
+    st = sh.stats()  # every read indexes what was announced before it
+    assert st["size_sequences"] == 8 and st["inserts"] == 11 and st["drops_evicted"] == 3
+    assert st["drops_corrupt"] == 1 and st["drops_policy_lag"] == 2 and r.llen(f"{namespace}:pending") == 0
+    assert set(sh.sample(400)["data"]["obs"][:, 0, 0].astype(int)) == set(range(3, 11))
+    assert [r.exists(k) for k in k1 + k2] == [0] * 3 + [1] * 8  # the evicted ones' records are gone
+    assert sh.drain() == 0 and sh.stats()["inserts"] == 11  # nothing indexed twice
 
 
 def test_memory_checkpoint_restores_exactly(tmp_path):

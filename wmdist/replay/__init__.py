@@ -10,14 +10,24 @@ Where the bytes go (a Ray actor call costs ~1-5 ms and copies what it carries):
   batched actor call per destination shard (Ray's object store carries the numpy buffers);
   the shard copies them once into its preallocated ring arrays. A sample is one call per
   shard returning the gathered rows `[k, T, ...]`.
-- redis backend: bytes never go through Ray. The client encodes each window as one
-  msgpack record and writes them in one pipeline straight to redis-server, then makes one
-  small call per shard to index the keys (`insert_keys`, one MULTI/EXEC). A sample asks each
-  shard for keys, stamps and weights only, then reads the records with one MGET.
-- Both: one rate-limiter call per insert and per sample (none when the ratio is off and
-  `min_size` is reached: the counts are sent without waiting), one `mass` call per shard
-  when S > 1 (to split B by size or priority mass). Write-backs go through the shard
-  (stamp check, then a patch of the stored record), one call per shard.
+- redis backend: bytes never go through Ray, and neither a shard nor any Ray call sits on
+  the insert path or (most of the time) the sample path. An insert is one MULTI/EXEC from
+  the client: the records (msgpack, encoded through a precomputed `layout.RecordLayout`) and
+  one small entry per destination shard on that shard's pending list; it is acknowledged
+  when redis answers (after fsync under `appendfsync always`). Shards index pending entries
+  on their next read and on a 0.2 s tick (index + LTRIM in one transaction, so exactly once;
+  a restarted shard indexes them too). A sample takes (slot, stamp, key, mass) draws from
+  per-shard pools (`draws.DrawPool`) that the client refills with one shard call per ~8
+  samples, sent ahead so it is back in time, then reads the records with one MGET. A
+  client's own insert or write-back voids its pools (read your writes); draws are at most
+  a second old; a pooled draw whose record was evicted since is drawn again.
+- Both: one rate-limiter call per insert and per sample. An insert waits for it only when
+  the ratio or `max_policy_lag` is on, a sample only while the ratio is on or `min_size` is
+  not reached yet; otherwise the counts are sent without waiting (warm sample counts at
+  most every 50 ms). Memory: one `mass` call per
+  shard when S > 1 (redis: the pools carry each shard's size and mass) to split B by size
+  or priority mass. Write-backs go through the shard (stamp check, then a patch of the
+  stored record), one call per shard.
 The shard actors are the only writers of their index, so stamp checks and eviction stay
 consistent without redis-side locking; record keys are never reused, so a reader holding a
 stale key gets the old record or nothing, never another sequence.

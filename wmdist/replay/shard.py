@@ -6,6 +6,10 @@ p^alpha for prioritized). Slots are a FIFO ring: write id w goes to slot w % cap
 the oldest sequence is evicted first. A write-back names (slot, stamp); if the slot has been
 rewritten since (stamp differs) it is dropped and counted, never applied to other data.
 All methods take one lock, so a threaded actor can serve them concurrently.
+
+Durable (redis) storage also takes inserts clients wrote themselves: they announce them in
+the storage's pending list and `drain()` indexes them. Every read (`sample`, `draw`, `mass`,
+`stats`, `save`) drains first, so a reader sees every insert acknowledged before its call.
 """
 from __future__ import annotations
 
@@ -73,6 +77,7 @@ class ReplayShard:
             self.tree.set(slots, self._mass(self.priority[slots]))
             for reason, n in drops.items():
                 self.counters[f"drops_{reason}"] += n
+            self.drain()  # inserts acknowledged but not yet indexed when the shard stopped
 
     @property
     def size_sequences(self) -> int:
@@ -121,6 +126,37 @@ class ReplayShard:
             self.counters["drops_policy_lag"] += int(lag_drops)  # counted once the insert succeeded
             return stored
 
+    def drain(self, limit: int = 1024) -> int:
+        """Index the inserts clients announced in durable storage (oldest first); returns
+        real steps stored. Each batch of entries is indexed and trimmed in one transaction."""
+        if not getattr(self.storage, "durable", False):
+            return 0
+        stored = 0
+        with self.lock:
+            while True:
+                entries, consumed, bad = self.storage.read_pending(limit)
+                if consumed == 0:
+                    return stored
+                keys = [k for e in entries for k in e[0]]
+                version, episode, steps = (np.concatenate([e[i] for e in entries] or [np.zeros(0, np.int64)])
+                                           for i in (1, 2, 3))
+                lag = sum(e[4] for e in entries)
+                n, discard = len(keys), []
+                if n > self.capacity:  # only the newest `capacity` would survive anyway
+                    discard, keys = keys[:n - self.capacity], keys[n - self.capacity:]
+                    version, episode, steps = (x[n - self.capacity:] for x in (version, episode, steps))
+                    self._skip(n - self.capacity)
+                if keys:
+                    stored += self._place(version, episode, steps, lambda slots, meta: self.storage.register(
+                        slots, keys, meta, consumed=consumed, discard=discard, check=False))
+                else:
+                    self.storage.register(np.zeros(0, np.int64), [], {}, consumed=consumed, discard=discard,
+                                          check=False)
+                self.counters["drops_policy_lag"] += lag
+                self.counters["drops_corrupt"] += bad  # malformed entries (their records become orphans)
+                if consumed < limit:
+                    return stored
+
     def _skip(self, n: int) -> None:
         """n windows of one call that would be evicted by the same call."""
         self.counters["drops_evicted"] += n
@@ -148,6 +184,7 @@ class ReplayShard:
     # -- sample -------------------------------------------------------------------------
     def mass(self) -> tuple[int, float, int]:
         """(sequences, total sampling mass, real steps) for the client's cross-shard split."""
+        self.drain()
         with self.lock:
             return self.size_sequences, self.tree.total, self.size_steps
 
@@ -161,6 +198,7 @@ class ReplayShard:
         """
         if k < 0:
             raise ValueError(f"sample size must be >= 0, got {k}")
+        self.drain()
         with self.lock:
             if self.tree.total <= 0:
                 raise ValueError(f"replay shard {self.shard_id} is empty")
@@ -194,6 +232,21 @@ class ReplayShard:
             self.counters["samples"] += k
             out.update(is_weight=w.astype(np.float32), slots=slots, stamps=self.stamp[slots].copy())
             return out
+
+    def draw(self, k: int) -> dict:
+        """k draws for a reader that fetches the records itself -> {"slots", "stamps", "keys",
+        "mass" [k] (each draw's sampling mass, for IS weights), "size" (sequences), "total"
+        (sampling mass)}; an empty shard returns no draws (and total 0) instead of raising."""
+        if k < 0:
+            raise ValueError(f"draw size must be >= 0, got {k}")
+        self.drain()
+        with self.lock:
+            total, size = self.tree.total, self.size_sequences
+            slots = self.tree.sample(k, self.rng) if total > 0 and k > 0 else np.zeros(0, np.int64)
+            self.counters["samples"] += slots.size
+            keys = self.storage.key_of(slots) if self.storage.durable else []  # memory: nothing to fetch by key
+            return {"slots": slots, "stamps": self.stamp[slots].copy(), "keys": keys,
+                    "mass": self.tree.get(slots), "size": size, "total": total}
 
     def _drop(self, slots: np.ndarray) -> None:
         self.counters["drops_corrupt"] += slots.size
@@ -258,6 +311,7 @@ class ReplayShard:
 
     # -- stats and checkpoints ----------------------------------------------------------
     def stats(self) -> dict[str, float]:
+        self.drain()
         with self.lock:
             index = sum(getattr(self, k).nbytes for k in self._INDEX) + self.tree.tree.nbytes
             return {"size_steps": float(self.size_steps), "size_sequences": float(self.size_sequences),
@@ -268,6 +322,7 @@ class ReplayShard:
 
     def save(self, path: str) -> None:
         """Write index, priorities, counters and (memory storage) the arrays to `path` (.npz)."""
+        self.drain()
         with self.lock:
             arrays = {"i_" + k: getattr(self, k) for k in self._INDEX}
             if not self.storage.durable:

@@ -5,21 +5,29 @@ Keys are namespaced by run and shard (`wmdist:<run>:s<shard>:...`):
 - `...:r:<token>` string: `codec.encode_record` of one sequence (`[T, ...]` per field plus
   `_mask`, and metadata version / episode / steps). Tokens are unique, so a key never
   changes meaning: a reader holding an old key finds the old record or nothing.
+- `...:pending` list: msgpack [keys, versions, episodes, steps, policy-lag drops], one entry
+  per client insert, pushed in the same MULTI/EXEC as the records (`commit_records`); the
+  shard indexes and trims it (`read_pending`, `register(consumed=...)`);
 - `...:idx`  hash slot -> msgpack [key, stamp, version, episode, steps]: the shard's index;
 - `...:prio` hash slot -> priority (raw, before alpha);
 - `...:meta` hash: `count` (sequences ever indexed; the next slot is count % capacity),
   `capacity`, `seq_len` (a restart with another layout is refused).
 
-Data path: record bytes can be written and read by any process (`put_records`,
-`fetch_records`: one pipeline of SETs / one MGET), so collectors and the learner move bytes
-to and from redis directly while the shard actor only indexes keys (`register`). The
-shard's own `write` (used in-process) is records + register in one MULTI/EXEC.
+Data path: record bytes can be written and read by any process (`commit_records`,
+`fetch_records`: one MULTI/EXEC of SETs + the pending entries / one MGET), so collectors and
+the learner move bytes to and from redis directly while the shard actor only indexes keys.
+Records of one schema are encoded and decoded through a precomputed `RecordLayout` (the
+codec's bytes, without walking msgpack per array). The shard's own `write` (used
+in-process) is records + register in one MULTI/EXEC.
 
-Durability: `register` is one MULTI/EXEC (index, priorities, count, and DEL of the records
-it evicts), issued after the records were written; under `appendfsync always` both are
-fsynced before the insert is acknowledged. `load()` rebuilds the index and priorities
-after a restart, skips and counts records that fail to decode, and deletes records no
-index entry names (written by an insert that was never acknowledged).
+Durability: a client insert is acknowledged once its MULTI/EXEC (records + pending entry)
+returns; under `appendfsync always` that is after fsync. The shard indexes pending entries
+later: `register` is one MULTI/EXEC (index, priorities, count, DEL of the records it
+evicts, LTRIM of the entries it consumed), so an entry is indexed exactly once even if the
+shard dies half-way. `load()` rebuilds the index and priorities after a restart, skips and
+counts records that fail to decode, and deletes records that neither the index nor a
+pending entry names (written by an insert that was never acknowledged); the shard then
+indexes the pending entries, so acknowledged inserts survive a shard restart.
 """
 from __future__ import annotations
 
@@ -33,6 +41,7 @@ import redis
 from wmdist.algos.base import FieldSpec
 from wmdist.replay.batch import SequenceBatch
 from wmdist.replay.codec import CodecError, decode_record, encode_record
+from wmdist.replay.layout import RecordLayout, layout_for, schema_of
 
 
 def connect(url: str, password_file: str = "") -> redis.Redis:
@@ -51,12 +60,43 @@ class RecordsMissing(RuntimeError):
 
 
 # -- records (any process) ------------------------------------------------------------------
+def batch_layout(batch: SequenceBatch) -> RecordLayout:
+    """The record layout of a batch's schema (fields as the batch holds them)."""
+    return layout_for(schema_of({k: _Spec(v.shape[2:], v.dtype) for k, v in batch.data.items()},
+                                batch.mask.shape[1]))
+
+
+class _Spec:  # FieldSpec-like view of an array column (shape without [N, T])
+    def __init__(self, shape: tuple[int, ...], dtype: np.dtype) -> None:
+        self.shape, self.dtype = tuple(shape), dtype
+
+
 def encode_rows(batch: SequenceBatch, rows: np.ndarray) -> list[bytes]:
-    """One record per selected window of the batch."""
-    steps = batch.mask.sum(axis=1)
-    return [encode_record({**{k: v[r] for k, v in batch.data.items()}, "_mask": batch.mask[r]},
-                          {"version": int(batch.version[r]), "episode": int(batch.episode_id[r]),
-                           "steps": int(steps[r])}) for r in rows]
+    """One record per selected window of the batch (`codec.encode_record` bytes)."""
+    rows = np.asarray(rows, np.int64)
+    steps = batch.mask[rows].sum(axis=1)
+    meta = [{"version": int(batch.version[r]), "episode": int(batch.episode_id[r]), "steps": int(n)}
+            for r, n in zip(rows, steps)]
+    return batch_layout(batch).encode_rows({k: v[rows] for k, v in batch.data.items()}, batch.mask[rows], meta)
+
+
+def pending_entry(keys: list[str], version: np.ndarray, episode: np.ndarray, steps: np.ndarray,
+                  lag_drops: int = 0) -> bytes:
+    """The announcement of one client insert to a shard (see `...:pending`)."""
+    return msgpack.packb([list(keys), [int(x) for x in version], [int(x) for x in episode],
+                          [int(x) for x in steps], int(lag_drops)])
+
+
+def commit_records(r: redis.Redis, writes: list[tuple[str, dict[str, bytes], bytes]]) -> None:
+    """One MULTI/EXEC: every shard's records (MSET) and its pending entry (namespace, records,
+    entry). Atomic, so a restarting shard sees both or neither; acknowledged on return."""
+    records = {k: v for _, recs, _ in writes for k, v in recs.items()}
+    p = r.pipeline(transaction=True)
+    if records:
+        p.mset(records)  # one command: redis parses and queues less than one SET per record
+    for ns, _, entry in writes:
+        p.rpush(f"{ns}:pending", entry)
+    p.execute()
 
 
 def new_keys(namespace: str, n: int) -> list[str]:
@@ -93,29 +133,38 @@ def fetch_records(r: redis.Redis, keys: list[str], fields: dict[str, FieldSpec],
     """One MGET of the distinct keys -> (fields [B, T, ...], mask [B, T] bool,
     missing rows (key gone: evicted since it was drawn), corrupt rows)."""
     uniq = list(dict.fromkeys(keys))
-    pos = {k: i for i, k in enumerate(uniq)}
     raws = r.mget(uniq) if uniq else []
-    U = len(uniq)
-    out = {k: np.empty((U, seq_len, *s.shape), dtype=s.dtype) for k, s in fields.items()}
-    mask = np.zeros((U, seq_len), dtype=bool)
-    state = np.zeros(U, np.int8)  # 0 ok, 1 missing, 2 corrupt
-    for i, raw in enumerate(raws):
-        if raw is None:
-            state[i] = 1
-            continue
-        try:
-            arrs, _ = decode_checked(raw, fields, seq_len)
-        except CodecError:
-            state[i] = 2
-            continue
-        for k in fields:
-            out[k][i] = arrs[k]
-        mask[i] = arrs["_mask"]
-    inv = np.array([pos[k] for k in keys], dtype=np.int64)
-    if U == len(keys):  # no duplicates: rows are already in order
+    out, state = decode_records(raws, fields, seq_len)
+    mask = out.pop("_mask")
+    if len(uniq) == len(keys):  # no duplicates: rows are already in order
         return out, mask, np.flatnonzero(state == 1), np.flatnonzero(state == 2)
+    pos = {k: i for i, k in enumerate(uniq)}
+    inv = np.array([pos[k] for k in keys], dtype=np.int64)
     st = state[inv]
     return {k: v[inv] for k, v in out.items()}, mask[inv], np.flatnonzero(st == 1), np.flatnonzero(st == 2)
+
+
+def decode_records(raws: list, fields: dict[str, FieldSpec], seq_len: int) -> tuple[dict[str, np.ndarray], np.ndarray]:
+    """Stored records -> ({field: [U, T, ...], "_mask": [U, T]}, state [U]: 0 ok, 1 missing, 2 corrupt)."""
+    out, state, _ = layout_for(schema_of(fields, seq_len)).decode_many(raws)
+    return out, state
+
+
+def _parse_entry(raw: bytes, prefix: str, seq_len: int) -> tuple | None:
+    """A pending entry -> (keys, version, episode, steps [n] int64, lag_drops), None if malformed."""
+    try:
+        e = msgpack.unpackb(raw, raw=False, strict_map_key=True)
+    except Exception:  # msgpack raises several types for bad input
+        return None
+    if not (isinstance(e, list) and len(e) == 5 and all(isinstance(x, list) for x in e[:4])
+            and isinstance(e[4], int) and e[4] >= 0):
+        return None
+    keys, cols = e[0], e[1:4]
+    if (not all(isinstance(k, str) and k.startswith(prefix) for k in keys)
+            or any(len(c) != len(keys) or not all(type(x) is int for x in c) for c in cols)
+            or not all(1 <= x <= seq_len for x in cols[2])):
+        return None
+    return (keys, *(np.array(c, np.int64) for c in cols), e[4])
 
 
 # -- the shard's side -------------------------------------------------------------------------
@@ -127,6 +176,7 @@ class RedisStorage:
         self.fields, self.capacity, self.T = dict(fields), capacity, seq_len
         self.r = client
         self.ns = namespace
+        self.layout = layout_for(schema_of(fields, seq_len))
         self.keys: list[str | None] = [None] * capacity  # [C] record key per slot
         meta = {k.decode(): v.decode() for k, v in self.r.hgetall(f"{self.ns}:meta").items()}
         if meta:
@@ -167,17 +217,38 @@ class RedisStorage:
         for s, k in zip(slots, keys):
             self.keys[int(s)] = k
 
-    def register(self, slots: np.ndarray, keys: list[str], meta: dict[str, np.ndarray]) -> None:
-        """Index records a client already wrote (the direct path)."""
-        if keys and self.r.exists(*set(keys)) != len(set(keys)):
+    def register(self, slots: np.ndarray, keys: list[str], meta: dict[str, np.ndarray], consumed: int = 0,
+                 discard: list[str] = (), check: bool = True) -> None:
+        """Index records a client already wrote (the direct path). `consumed` pending entries
+        are trimmed and `discard` records deleted in the same MULTI/EXEC. With `check`, refuse
+        keys whose records are gone (`insert_keys`: the client writes them again)."""
+        if check and keys and self.r.exists(*set(keys)) != len(set(keys)):
             # a restart of this shard between the client's write and this call removed them as
             # unacknowledged: refuse, so the insert is not acknowledged (the client writes again)
             raise RecordsMissing(f"{self.ns}: records to index are gone; write them again")
         p = self.r.pipeline(transaction=True)
-        self._register_cmds(p, slots, keys, meta)
+        if len(slots):
+            self._register_cmds(p, slots, keys, meta)
+        if consumed:
+            p.ltrim(f"{self.ns}:pending", consumed, -1)
+        if discard:
+            p.delete(*discard)
         p.execute()
         for s, k in zip(slots, keys):
             self.keys[int(s)] = k
+
+    def read_pending(self, limit: int = 1024) -> tuple[list[tuple], int, int]:
+        """Up to `limit` announced client inserts, oldest first -> (valid entries as
+        (keys, version, episode, steps, lag_drops), entries read, malformed entries)."""
+        raws = self.r.lrange(f"{self.ns}:pending", 0, limit - 1)
+        good, bad = [], 0
+        for raw in raws:
+            e = _parse_entry(raw, f"{self.ns}:r:", self.T)
+            if e is None:
+                bad += 1
+            else:
+                good.append(e)
+        return good, len(raws), bad
 
     def discard_keys(self, keys: list[str]) -> None:
         """Delete records that will never be indexed (dropped before indexing)."""
@@ -224,9 +295,12 @@ class RedisStorage:
         if len(slots):
             self.r.hset(f"{self.ns}:prio", mapping={int(s): repr(float(p)) for s, p in zip(slots, priorities)})
 
-    def load(self, chunk: int = 16) -> tuple[dict[str, np.ndarray], int, dict[str, int]]:
+    def load(self, chunk: int = 64) -> tuple[dict[str, np.ndarray], int, dict[str, int]]:
         """Rebuild from redis -> (index arrays [capacity] incl. priority, count, drops by reason)."""
         C = self.capacity
+        # records first, then the index and pending entries: a record written while we scan
+        # comes with its pending entry (one MULTI/EXEC), which we then read, so it is no orphan
+        found = [x.decode() for x in self.r.scan_iter(match=f"{self.ns}:r:*", count=1000)]
         idx = {"stamp": np.full(C, -1, np.int64), "version": np.zeros(C, np.int64),
                "episode": np.zeros(C, np.int64), "steps": np.zeros(C, np.int64),
                "priority": np.full(C, np.nan)}  # NaN = no stored priority
@@ -248,14 +322,9 @@ class RedisStorage:
         slots, bad_slots = sorted(entries), [s for s in entries_bad]
         for start in range(0, len(slots), chunk):  # check every record decodes
             part = slots[start:start + chunk]
-            for s, raw in zip(part, self.r.mget([entries[x][0] for x in part])):
-                try:
-                    if raw is None:
-                        raise CodecError("record missing")
-                    _, meta = decode_checked(raw, self.fields, self.T)
-                    if meta["steps"] != entries[s][4]:
-                        raise CodecError("record disagrees with its index entry")
-                except CodecError:
+            _, _, metas = self.layout.decode_many(self.r.mget([entries[x][0] for x in part]))
+            for s, meta in zip(part, metas):
+                if meta is None or meta["steps"] != entries[s][4]:  # missing, corrupt or disagreeing
                     corrupt += 1
                     bad_slots.append(s)
                     continue
@@ -270,8 +339,9 @@ class RedisStorage:
                 idx["priority"][s] = v
         known = {k for k in self.keys if k is not None}
         named = {e[0] for e in entries.values()}  # corrupt ones were counted already
-        found = [x.decode() for x in self.r.scan_iter(match=f"{self.ns}:r:*", count=1000)]
-        orphans = [k for k in found if k not in named]
+        pending = {k for raw in self.r.lrange(f"{self.ns}:pending", 0, -1)
+                   for k in (_parse_entry(raw, f"{self.ns}:r:", self.T) or [[]])[0]}
+        orphans = [k for k in found if k not in named and k not in pending]
         self.discard_keys(orphans + [k for k in found if k in named and k not in known])
         if bad_slots:
             self.r.hdel(f"{self.ns}:idx", *bad_slots)

@@ -3,14 +3,17 @@
 `ShardActor` holds one `ReplayShard` (threaded: a blocking call never stalls the others);
 with the redis backend it rebuilds its index from redis in `__init__`, so a Ray restart
 (`max_restarts`) after the process died brings back every acknowledged sequence.
-With redis the shard only indexes: clients write and read the record bytes themselves
-(`insert_keys`, `sample(fetch=False)`).
+With redis the shard only indexes: clients write the record bytes and a pending entry
+themselves and read them back by key (`draw`); a background thread drains the pending
+entries every `DRAIN_SECONDS` (every read drains too), so eviction keeps up even while
+nobody samples.
 `LimiterActor` holds the one `RateLimiter` of the run (shared by all shards) and the
 learner's current policy version (for `max_policy_lag`).
 """
 from __future__ import annotations
 
 import os
+import threading
 
 import numpy as np
 
@@ -19,6 +22,8 @@ from wmdist.replay.batch import SequenceBatch
 from wmdist.replay.limiter import RateLimiter
 from wmdist.replay.shard import ReplayShard
 from wmdist.replay.storage_memory import MemoryStorage
+
+DRAIN_SECONDS = 0.2
 
 
 class ShardActor:
@@ -32,6 +37,16 @@ class ShardActor:
         else:
             storage = MemoryStorage(fields, capacity, seq_len)
         self.shard = ReplayShard(fields, seq_len, capacity, sampler, alpha, storage, seed, shard_id)
+        self._stop = threading.Event()
+        if backend == "redis":
+            threading.Thread(target=self._drain_loop, name="drain", daemon=True).start()
+
+    def _drain_loop(self) -> None:
+        while not self._stop.wait(DRAIN_SECONDS):
+            try:
+                self.shard.drain()
+            except Exception:  # noqa: BLE001 - redis away: entries stay pending, the next tick retries
+                pass
 
     def pid(self) -> int:
         return os.getpid()
@@ -42,6 +57,9 @@ class ShardActor:
     def insert_keys(self, keys: list[str], version: np.ndarray, episode: np.ndarray, steps: np.ndarray,
                     lag_drops: int) -> int:
         return self.shard.insert_keys(keys, version, episode, steps, lag_drops)
+
+    def draw(self, k: int) -> dict:
+        return self.shard.draw(k)
 
     def drop_corrupt(self, slots: np.ndarray, stamps: np.ndarray) -> int:
         return self.shard.drop_corrupt(slots, stamps)
@@ -68,7 +86,9 @@ class ShardActor:
         self.shard.restore(path)
 
     def close(self) -> None:
-        self.shard.close()
+        self._stop.set()
+        with self.shard.lock:  # let a running drain finish before the connection closes
+            self.shard.close()
 
 
 class LimiterActor:
@@ -80,6 +100,11 @@ class LimiterActor:
         return self.limiter.acquire_insert(n, timeout), self.version
 
     def commit_insert(self, n_steps: int) -> None:
+        self.limiter.commit_insert(n_steps)
+
+    def record_insert(self, n: int, n_steps: int) -> None:
+        """An insert that needed no permission (ratio off, no policy lag): count it and its steps."""
+        self.limiter.acquire_insert(n, 0)
         self.limiter.commit_insert(n_steps)
 
     def acquire_sample(self, n: int, timeout: float | None) -> bool:

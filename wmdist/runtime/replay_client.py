@@ -23,17 +23,26 @@ from __future__ import annotations
 
 import json
 import os
+import threading
+import time
 
 import numpy as np
 import ray
-from ray.exceptions import RayActorError, RayTaskError
+from ray.exceptions import RayActorError
 
 from wmdist.algos.base import FieldSpec
 from wmdist.replay.batch import Sample, SequenceBatch, make_keys, split_keys
 from wmdist.replay.config import ReplayConfig
+from wmdist.replay.draws import DrawPool, is_weights
 from wmdist.replay.shard import DROP_REASONS
-from wmdist.replay.storage_redis import (RecordsMissing, connect, encode_rows, fetch_records, new_keys,
-                                         put_records)
+from wmdist.replay.storage_redis import (
+    commit_records,
+    connect,
+    encode_rows,
+    fetch_records,
+    new_keys,
+    pending_entry,
+)
 from wmdist.runtime.replay_actor import LimiterActor, ShardActor
 
 
@@ -44,6 +53,12 @@ def route(source_id: int, episode_id: np.ndarray, shards: int) -> np.ndarray:
         h = (h ^ (h >> np.uint64(31))) * np.uint64(0xBF58476D1CE4E5B9)
         h ^= h >> np.uint64(29)
     return (h % np.uint64(shards)).astype(np.int64)
+
+
+# redis: draws asked ahead, in batches of B: one shard call per that many samples, sent that
+# many calls before it is needed (on a loaded machine a shard call can take 10+ ms)
+PREFETCH_BATCHES = 8
+MAX_DRAW_AGE = 1.0  # seconds: older draws are dropped, so a slow reader sees fresh contents
 
 
 class ReplayClient:
@@ -59,10 +74,18 @@ class ReplayClient:
         self._closed = False
         self._rng: np.random.Generator | None = None
         self._warm = False  # this copy saw min_size reached with the ratio off
+        self._unsent_samples, self._sent_at = 0, 0.0  # sample counts not yet sent to the limiter (warm)
+        # redis: draws taken ahead per shard (see `wmdist/replay/draws.py`); `_gen` counts this
+        # copy's writes, and draws taken before one of them are dropped (read-your-writes)
+        self._pools: list[DrawPool] = [DrawPool() for _ in self.shards]
+        self._inflight: dict[int, tuple[int, object]] = {}  # shard -> (generation, draw ref)
+        self._gen, self._pool_gen = 0, 0
+        self._draw_lock: threading.Lock | None = None
 
     def __getstate__(self) -> dict:
         state = dict(self.__dict__)
-        state.update(_server=None, _owner=False, _rng=None, _redis=None, _warm=False)
+        state.update(_server=None, _owner=False, _rng=None, _redis=None, _warm=False, _unsent_samples=0,
+                     _pools=[DrawPool() for _ in self.shards], _inflight={}, _draw_lock=None)
         return state
 
     @property
@@ -92,12 +115,9 @@ class ReplayClient:
         if n == 0:
             return True
         lag = self.cfg.max_policy_lag
+        free = self.cfg.samples_per_insert == 0 and lag == 0  # never waits: counted afterwards, no round trip
         try:
-            if self.cfg.samples_per_insert == 0 and lag == 0:  # never waits: count it without a round trip
-                self.limiter.acquire_insert.remote(n, 0)
-                ok, version = True, -1
-            else:
-                ok, version = ray.get(self.limiter.acquire_insert.remote(n, timeout))
+            ok, version = (True, -1) if free else ray.get(self.limiter.acquire_insert.remote(n, timeout))
         except RayActorError:
             return False  # the service was shut down
         if not ok:
@@ -106,44 +126,40 @@ class ReplayClient:
         dest = route(source_id, batch.episode_id, len(self.shards))
         if self.direct:
             steps = self._insert_direct(batch, dest, min_version)
+            self._gen += 1  # the next sample draws afresh, so it sees these
         else:  # one batched call per shard; Ray carries the arrays
             targets = np.unique(dest)
             steps = sum(ray.get([self.shards[s].insert.remote(
                 batch if targets.size == 1 else batch.select(np.flatnonzero(dest == s)), min_version)
                 for s in targets]))
-        self.limiter.commit_insert.remote(steps)
+        if free:
+            self.limiter.record_insert.remote(n, steps)
+        else:
+            self.limiter.commit_insert.remote(steps)
         return True
 
     def _insert_direct(self, batch: SequenceBatch, dest: np.ndarray, min_version: int | None) -> int:
-        """Records go to redis in one pipeline, then each shard indexes its keys (one small
-        call). A shard that restarted in between has removed the records as unacknowledged
-        and refuses them: they are written again for that shard only."""
+        """Every shard's records and its pending entry go to redis in one MULTI/EXEC (one round
+        trip, fsynced under `appendfsync always` before it returns: the acknowledgement). The
+        shards index the entries later (on their next read or drain tick); a shard restart
+        in between indexes them on reload. Returns the real steps the shards will keep."""
         keep = np.ones(len(batch), bool) if min_version is None else batch.version >= min_version
         steps = batch.mask.sum(axis=1).astype(np.int64)
-        plan = {int(s): (np.flatnonzero((dest == s) & keep), int(((dest == s) & ~keep).sum()))
-                for s in np.unique(dest)}
-        todo, stored = list(plan), 0
-        for attempt in range(3):
-            records, refs = {}, {}
-            for s in todo:
-                rows, lag = plan[s]
-                keys = new_keys(self._namespaces[s], rows.size)
-                records.update(zip(keys, encode_rows(batch, rows)))
-                refs[s] = (keys, rows, lag)
-            put_records(self.redis, records)
-            refs = {s: self.shards[s].insert_keys.remote(keys, batch.version[rows], batch.episode_id[rows],
-                                                         steps[rows], lag)
-                    for s, (keys, rows, lag) in refs.items()}
-            todo = []
-            for s, ref in refs.items():
-                try:
-                    stored += ray.get(ref)
-                except RayTaskError as e:
-                    if attempt == 2 or not isinstance(e.cause, RecordsMissing):
-                        raise
-                    todo.append(s)
-            if not todo:
-                break
+        if steps.min() < 1:  # the shards' pending entries require real steps in [1, T]
+            raise ValueError("replay insert: a window has no real step (its mask is all 0)")
+        cap = shard_capacity(self.cfg, self.fields)
+        writes, stored = [], 0
+        for s in np.unique(dest):
+            rows = np.flatnonzero((dest == s) & keep)
+            lag = int(((dest == s) & ~keep).sum())
+            if rows.size == 0 and lag == 0:
+                continue
+            ns = self._namespaces[int(s)]
+            keys = new_keys(ns, rows.size)
+            entry = pending_entry(keys, batch.version[rows], batch.episode_id[rows], steps[rows], lag)
+            writes.append((ns, dict(zip(keys, encode_rows(batch, rows))), entry))
+            stored += int(steps[rows][-cap:].sum()) if rows.size else 0  # a shard keeps its newest `cap`
+        commit_records(self.redis, writes)
         return stored
 
     # -- sample -------------------------------------------------------------------------
@@ -158,21 +174,35 @@ class ReplayClient:
             return None
         try:
             if limited and self._warm:  # ratio off and min_size reached (it stays reached): just count
-                self.limiter.acquire_sample.remote(batch_size, 0)
+                self._count_samples(batch_size)
             elif limited:
                 if not ray.get(self.limiter.acquire_sample.remote(batch_size, timeout)):
                     return None
                 self._warm = self.cfg.samples_per_insert == 0
-            if not limited and sum(m[0] for m in ray.get([s.mass.remote() for s in self.shards])) == 0:
+            if (not limited and not self.direct
+                    and sum(m[0] for m in ray.get([s.mass.remote() for s in self.shards])) == 0):
                 return None
         except RayActorError:
             return None
         try:
-            return self._sample(batch_size)
+            return self._sample_direct(batch_size, limited) if self.direct else self._sample(batch_size)
         except RayActorError:
             return None  # the service was shut down
 
+    def _count_samples(self, n: int) -> None:
+        """Warm and ratio off, the count gates nothing: send it at most every 50 ms."""
+        self._unsent_samples += n
+        if time.monotonic() - self._sent_at >= 0.05:
+            self._flush_samples()
+
+    def _flush_samples(self) -> None:
+        if self._unsent_samples:
+            self.limiter.acquire_sample.remote(self._unsent_samples, 0)
+            self._unsent_samples = 0
+        self._sent_at = time.monotonic()
+
     def _sample(self, batch_size: int) -> Sample:
+        """Memory backend: each shard gathers its rows and Ray carries them back."""
         S = len(self.shards)
         if S == 1:
             counts, n, mass = np.array([batch_size]), 0, 0.0
@@ -183,29 +213,105 @@ class ReplayClient:
             if mass <= 0:
                 raise ValueError("replay is empty (min_size 0 and nothing inserted)")
             counts = self.rng.multinomial(batch_size, np.array([m[1] for m in masses]) / mass)
-        beta = self.cfg.priority_beta if self.cfg.sampler == "prioritized" else 0.0
-        fetch = not self.direct
-        parts = [(i, self.shards[i].sample.remote(int(k), beta, n, mass, fetch)) for i, k in enumerate(counts) if k > 0]
+        beta = self._beta
+        parts = [(i, self.shards[i].sample.remote(int(k), beta, n, mass)) for i, k in enumerate(counts) if k > 0]
         got = ray.get([r for _, r in parts])
         w = np.concatenate([g["is_weight"] for g in got])
-        shard_of = np.concatenate([np.full(len(g["slots"]), i) for (i, _), g in zip(parts, got)])
-        slots = np.concatenate([g["slots"] for g in got])
-        stamps = np.concatenate([g["stamps"] for g in got])
-        if fetch:
-            data = {f: np.concatenate([g["data"][f] for g in got]) for f in self.fields}
-            mask = np.concatenate([g["mask"] for g in got])
-        else:
-            keys = [k for g in got for k in g["keys"]]
-            data, mask = self._fetch_direct(keys, shard_of, slots, stamps, w, beta, n, mass)
         return Sample(
-            data=data,
-            mask=mask.astype(np.float32),
+            data={f: np.concatenate([g["data"][f] for g in got]) for f in self.fields},
+            mask=np.concatenate([g["mask"] for g in got]).astype(np.float32),
             is_weight=(w / w.max()).astype(np.float32),  # normalised by the batch max (Schaul et al. 2016)
-            keys=make_keys(shard_of, slots),
-            stamps=stamps,
+            keys=make_keys(np.concatenate([np.full(len(g["slots"]), i) for (i, _), g in zip(parts, got)]),
+                           np.concatenate([g["slots"] for g in got])),
+            stamps=np.concatenate([g["stamps"] for g in got]),
         )
 
-    def _fetch_direct(self, keys, shard_of, slots, stamps, w, beta, n, mass):
+    @property
+    def _beta(self) -> float:
+        return self.cfg.priority_beta if self.cfg.sampler == "prioritized" else 0.0
+
+    def _sample_direct(self, batch_size: int, limited: bool) -> Sample | None:
+        """Redis backend: draws from the pools (no shard round trip when the prefetched draws
+        are back), then one MGET of the records."""
+        if self._draw_lock is None:
+            self._draw_lock = threading.Lock()
+        with self._draw_lock:
+            got = self._take_draws(batch_size)
+            if got is None:
+                if not limited:
+                    return None
+                raise ValueError("replay is empty (min_size 0 and nothing inserted)")
+            shard_of, slots, stamps, mass, keys, n, total = got
+            w = is_weights(mass, n, total, self._beta)
+            data, mask = self._fetch_direct(keys, shard_of, slots, stamps, w, n, total)
+        return Sample(data=data, mask=mask.astype(np.float32),
+                      is_weight=(w / w.max()).astype(np.float32),  # normalised by the batch max
+                      keys=make_keys(shard_of, slots), stamps=stamps)
+
+    def _take_draws(self, B: int):
+        """B draws split over shards by their latest size / mass reports -> (shard_of, slots,
+        stamps, mass, keys, union size, union mass), or None if every shard is empty.
+
+        Draws a shard call returns wait in per-shard pools. A call that finds enough there
+        makes no shard round trip; one that does not asks for exactly what it lacks. When
+        this copy made no write since its previous sample, every pool below
+        PREFETCH_BATCHES * B gets a request for that many in flight (read back by a later
+        call); after a write (e.g. a priority update each learner step) nothing is asked
+        ahead, since the write would void it. Draws older than MAX_DRAW_AGE are dropped."""
+        S, pools = len(self.shards), self._pools
+        steady = self._pool_gen == self._gen
+        if not steady:  # this copy wrote since these were drawn: they may not reflect it
+            for p in pools:
+                p.clear()
+            self._inflight.clear()
+            self._pool_gen = self._gen
+        now = time.monotonic()
+        for p in pools:
+            p.expire(now - MAX_DRAW_AGE)
+        self._refill([s for s in range(S) if not pools[s].reported], B)
+        if sum(p.total for p in pools) <= 0:  # maybe an old report: ask every shard afresh
+            for p in pools:
+                p.clear()
+            self._refill(range(S), B, fresh=True)
+            if sum(p.total for p in pools) <= 0:
+                return None
+        for _ in range(100):
+            totals = np.array([p.total for p in pools])
+            counts = np.array([B]) if S == 1 else self.rng.multinomial(B, totals / totals.sum())
+            short = [s for s in range(S) if len(pools[s]) < counts[s]]
+            if not short:
+                break
+            self._refill(short, B)
+            if sum(p.total for p in pools) <= 0:
+                return None
+        else:
+            raise RuntimeError("replay: shards kept returning too few draws")
+        n, total = sum(p.size for p in pools), float(totals.sum())
+        taken = [(s, pools[s].take(int(k))) for s, k in enumerate(counts) if k > 0]
+        ahead = PREFETCH_BATCHES * B
+        for s in range(S) if steady else ():  # read back by a later call, so it is there in time
+            if len(pools[s]) < ahead and s not in self._inflight:
+                self._inflight[s] = (self._gen, self.shards[s].draw.remote(ahead))
+        shard_of = np.concatenate([np.full(len(t[0]), s, np.int64) for s, t in taken])
+        slots, stamps, mass = (np.concatenate([t[i] for _, t in taken]) for i in range(3))
+        return shard_of, slots, stamps, mass, [k for _, t in taken for k in t[3]], n, total
+
+    def _refill(self, shards, k: int, fresh: bool = False) -> None:
+        """Add each shard's in-flight draws to its pool (waiting for them), or, with `fresh` or
+        none in flight, k new draws."""
+        refs = {}
+        for s in shards:
+            gen, ref = self._inflight.pop(s, (None, None))
+            if ref is not None and gen == self._gen and not fresh:
+                refs[s] = ref
+            else:
+                refs[s] = self.shards[s].draw.remote(k)
+        got = ray.get(list(refs.values()))
+        now = time.monotonic()
+        for s, d in zip(refs, got):
+            self._pools[s].add(d, now)
+
+    def _fetch_direct(self, keys, shard_of, slots, stamps, w, n, total):
         """One MGET of the drawn records. Rows whose record is gone or undecodable are reported
         to their shard (which drops and counts them unless the slot was rewritten since the
         draw, i.e. evicted) and drawn again from the same shard."""
@@ -218,12 +324,15 @@ class ReplayClient:
             ray.get([self.shards[s].drop_corrupt.remote(slots[rows], stamps[rows]) for s, rows in by_shard])
             again = []
             for s, rows in by_shard:
-                g = ray.get(self.shards[s].sample.remote(rows.size, beta, n, mass, False))
+                g = ray.get(self.shards[s].draw.remote(rows.size))
+                if len(g["slots"]) < rows.size:
+                    raise ValueError(f"replay shard {s} is empty")
                 d2, m2, miss2, corr2 = fetch_records(self.redis, g["keys"], self.fields, self.cfg.seq_len)
                 for f in self.fields:
                     data[f][rows] = d2[f]
                 mask[rows] = m2
-                slots[rows], stamps[rows], w[rows] = g["slots"], g["stamps"], g["is_weight"]
+                slots[rows], stamps[rows] = g["slots"], g["stamps"]
+                w[rows] = is_weights(g["mass"], n, total, self._beta)
                 again.append(rows[np.union1d(miss2, corr2)])
             redo = np.concatenate(again)
         raise RuntimeError("replay: could not read a batch from redis after 100 redraws")
@@ -247,13 +356,17 @@ class ReplayClient:
             raise ValueError(f"priorities shape {pr.shape} != keys shape {np.shape(keys)}")
         refs = [self.shards[s].update_priorities.remote(sl, st, pr[rows])
                 for s, rows, sl, st in self._by_shard(keys, stamps)]
-        return int(sum(ray.get(refs)))
+        applied = int(sum(ray.get(refs)))
+        self._gen += 1  # draws taken before this reflect the old priorities
+        return applied
 
     def write_back(self, keys: np.ndarray, stamps: np.ndarray, fields: dict[str, np.ndarray]) -> int:
         """Overwrite stored fields [B, T, ...] of sampled keys; stale rows are dropped and counted."""
         refs = [self.shards[s].write_back.remote(sl, st, {k: v[rows] for k, v in fields.items()})
                 for s, rows, sl, st in self._by_shard(keys, stamps)]
-        return int(sum(ray.get(refs)))
+        applied = int(sum(ray.get(refs)))
+        self._gen += 1
+        return applied
 
     def set_policy_version(self, version: int) -> None:
         """The learner's latest published version (drives `max_policy_lag`)."""
@@ -261,6 +374,7 @@ class ReplayClient:
 
     # -- stats, checkpoints, shutdown ---------------------------------------------------
     def stats(self) -> dict[str, float]:
+        self._flush_samples()
         per = ray.get([s.stats.remote() for s in self.shards])
         out: dict[str, float] = {}
         for i, st in enumerate(per):
@@ -299,6 +413,10 @@ class ReplayClient:
         if self._closed:
             return
         self._closed = True
+        try:
+            self._flush_samples()
+        except Exception:  # noqa: BLE001 - the limiter is gone already
+            pass
         if self._redis is not None:
             self._redis.close()
         if not self._owner:
