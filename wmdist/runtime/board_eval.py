@@ -18,9 +18,11 @@ from wmdist.envs.boardgames.env import BoardEnv
 Opponent = Callable[[object], int]  # state -> action
 
 
-def _greedy(policy: Policy, obs: np.ndarray, legal: np.ndarray, to_play: int, first: bool) -> int:
-    actions, _ = policy.act(obs[None], np.array([first]), legal[None], np.array([to_play]), False)
-    return int(np.asarray(actions)[0])
+def greedy_action(policy: Policy, obs: np.ndarray, legal: np.ndarray | None, to_play: int | None, first: bool):
+    """The policy's greedy action for one observation (legal and to_play optional)."""
+    actions, _ = policy.act(obs[None], np.array([first]), None if legal is None else legal[None],
+                            None if to_play is None else np.array([to_play]), False)
+    return np.asarray(actions)[0]
 
 
 def play_board(policy: Policy, env: BoardEnv, agent_player: int, opponent: Opponent) -> float:
@@ -30,7 +32,7 @@ def play_board(policy: Policy, env: BoardEnv, agent_player: int, opponent: Oppon
     while True:
         mover = env.to_play()
         if mover == agent_player:
-            action = _greedy(policy, env.game.observe(env.state), env.legal_actions(), mover, first)
+            action = int(greedy_action(policy, env.game.observe(env.state), env.legal_actions(), mover, first))
             first = False
         else:
             action = opponent(env.state)

@@ -11,7 +11,7 @@ import numpy as np
 
 from wmdist.config.errors import ConfigError
 from wmdist.runtime import checkpoint as ck
-from wmdist.runtime.board_eval import default_opponent, play_games
+from wmdist.runtime.board_eval import default_opponent, greedy_action, play_games
 from wmdist.runtime.roles import build_algorithm
 from wmdist.runtime.train import env_spec_or_error, load_run_config
 
@@ -25,12 +25,6 @@ def load_run(run_dir: str):
     algo = build_algorithm(cfg, spec, cfg.run.seed + 31_337)
     version, weights = ck.load_weights(ckpt)
     return cfg, spec, algo, version, weights, ckpt
-
-
-def _greedy(policy, obs: np.ndarray, legal: np.ndarray | None, to_play: int | None, first: bool) -> int:
-    actions, _ = policy.act(obs[None], np.array([first]), None if legal is None else legal[None],
-                            None if to_play is None else np.array([to_play]), False)
-    return np.asarray(actions)[0]
 
 
 def _human(env, out: IO[str]) -> Callable[[object], int]:
@@ -90,7 +84,7 @@ def record_video(cfg, algo, weights, version: int, path: str, max_steps: int = 1
     legal = env.legal_actions()
     for _ in range(max_steps):
         frames.append(env.render())
-        action = _greedy(policy, obs, legal, env.to_play() if env.spec.players == 2 else None, first)
+        action = greedy_action(policy, obs, legal, env.to_play() if env.spec.players == 2 else None, first)
         first = False
         obs, _, terminated, truncated = env.step(action)
         legal = env.legal_actions()
