@@ -265,3 +265,26 @@ def test_sigterm_stops_a_run_with_a_checkpoint(tmp_path):
     assert "interrupted" in text
     run_dir = next(p for p in tmp_path.iterdir() if p.is_dir())
     assert ck.latest_checkpoint(run_dir) is not None
+
+
+@pytest.mark.parametrize("sampler", ["uniform", "prioritized"])
+def test_learner_writes_priorities_back_only_when_sampling_by_priority(ray_session, tmp_path, sampler):
+    import ray
+
+    topo = _topology(tmp_path, f"replay.sampler={sampler}", "replay.min_size=32", "run.max_updates=20",
+                     "run.max_minutes=3", "actors.num=1")
+    try:
+        result = Driver(topo, Counters()).run()
+        assert result.counters.updates >= 20
+        ray.get(topo.replay.shards[0].save.remote(str(tmp_path / "shard.npz")))
+        with np.load(tmp_path / "shard.npz") as saved:
+            stamp, priority = saved["i_stamp"], saved["i_priority"]
+        live = priority[stamp >= 0]  # occupied slots
+        assert live.size > 0
+        distinct = len(np.unique(live))
+        if sampler == "uniform":  # never read, so never written back: every item keeps its insert priority
+            assert distinct == 1, np.unique(live)
+        else:  # the fake learner's priorities (per-sequence losses) replaced the initial ones
+            assert distinct > 1
+    finally:
+        topo.shutdown()

@@ -132,7 +132,8 @@ class LearnerRole:
             self.nan_streak = 0
             self.updates += 1
             self._record(result.metrics)
-            if result.priorities is not None:
+            # uniform sampling never reads priorities: skip the shard call (and the draw-pool refresh it forces)
+            if result.priorities is not None and self.cfg.replay.sampler == "prioritized":
                 self.replay.update_priorities(sample.keys, sample.stamps, np.asarray(result.priorities, np.float64))
             if self.updates % self.cfg.learner.publish_every == 0:
                 self.version += 1
