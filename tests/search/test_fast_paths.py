@@ -11,9 +11,10 @@ import torch
 
 from wmdist.search.api import SearchConfig, SearchOutput, search
 from wmdist.search.engine import sample_actions, visit_policy
+from wmdist.search.layout import H_SIZE
 from wmdist.search.noise import considered_visit_table, draw_root_noise
 from wmdist.search.testing import HashModel
-from wmdist.search.tree import allocate, buffer_sizes, unpack
+from wmdist.search.tree import allocate, layout_of, unpack
 
 torch.set_num_threads(1)
 
@@ -31,17 +32,23 @@ def _same(a: SearchOutput, b: SearchOutput) -> None:
         assert getattr(a, name).tolist() == getattr(b, name).tolist(), name
 
 
-def test_flat_buffers_are_tiled_exactly_by_the_views() -> None:
+def test_buffer_regions_are_disjoint_views_of_the_buffer() -> None:
     table = considered_visit_table(4, 7)
-    tree_f, tree_i = allocate(3, 8, 5, table)
-    assert (tree_f.size, tree_i.size) == buffer_sizes(3, 8, 5, table.shape)
-    views = unpack(tree_f, tree_i)
-    assert sum(v.size for v in views[:6]) == tree_f.size  # float views, no gaps
-    assert sum(v.size for v in views[6:]) + 8 == tree_i.size  # int views after the header
-    assert views[7].tolist() == table.tolist()
-    for v in views:
-        v[...] = 1
-    assert (tree_f == 1).all() and (tree_i[8:] == 1).all()  # views write into the buffers
+    mem = allocate(3, 8, 5, table, 2)
+    lay = layout_of(mem)
+    assert mem.size == lay.size and mem.ctypes.data % 64 == 0
+    assert (lay.node0 * 8) % 64 == 0  # node blocks start on a cache line
+    views = unpack(mem)
+    assert views["table"].tolist() == table.tolist()
+    assert views["nodes"].shape == (3, 8, lay.block) and views["io"].shape == (2, 3, 2)
+    mem[...] = 0
+    for k, v in enumerate(views.values()):
+        v[...] = k + 1  # a later region overlapping an earlier one would overwrite it
+    for k, v in enumerate(views.values()):
+        assert (v == k + 1).all()
+    used = sum(v.size for v in views.values())
+    assert np.count_nonzero(mem) == used  # the views write into the buffer
+    assert mem.size - used < H_SIZE + 8  # only the header and the alignment gap are not a region
 
 
 def test_reused_workspaces_give_the_results_of_fresh_ones() -> None:

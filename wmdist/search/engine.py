@@ -1,5 +1,5 @@
 """The batched search loop: validation, one recurrent_fn call + one kernel call per
-simulation, outputs. The tree buffers come from a per-thread cache (`workspace.py`)."""
+simulation, outputs. The search buffer comes from a per-thread cache (`workspace.py`)."""
 from __future__ import annotations
 
 from typing import Any
@@ -21,18 +21,21 @@ def _as_float(x: Any, shape: tuple[int, ...], what: str) -> np.ndarray:
 
 
 def _write_params(p: np.ndarray, config: SearchConfig, two_player: bool, add_noise: bool) -> None:
-    p[L.P_C1] = config.c1
-    p[L.P_C2] = config.c2
-    p[L.P_GAMMA_SIGN] = config.discount * (-1.0 if two_player else 1.0)
-    p[L.P_UNVISITED_PARENT] = 1.0 if config.unvisited_value == "parent" else 0.0
-    p[L.P_GUMBEL] = 1.0 if config.gumbel else 0.0
-    p[L.P_C_VISIT] = config.gumbel_c_visit
-    p[L.P_C_SCALE] = config.gumbel_c_scale
-    p[L.P_VALUE_PREFIX] = 1.0 if config.value_prefix else 0.0
-    p[L.P_HORIZON] = config.lstm_horizon
-    p[L.P_MAX_CONSIDERED] = config.gumbel_max_considered
+    """The params region (layout.P_*), in one numpy call."""
     use_dirichlet = add_noise and not config.gumbel
-    p[L.P_NOISE_FRACTION] = config.dirichlet_fraction if use_dirichlet else 0.0
+    p[:L.NUM_PARAMS] = (
+        config.c1,  # P_C1
+        config.c2,  # P_C2
+        config.discount * (-1.0 if two_player else 1.0),  # P_GAMMA_SIGN
+        1.0 if config.unvisited_value == "parent" else 0.0,  # P_UNVISITED_PARENT
+        1.0 if config.gumbel else 0.0,  # P_GUMBEL
+        config.gumbel_c_visit,  # P_C_VISIT
+        config.gumbel_c_scale,  # P_C_SCALE
+        1.0 if config.value_prefix else 0.0,  # P_VALUE_PREFIX
+        config.lstm_horizon,  # P_HORIZON
+        config.gumbel_max_considered,  # P_MAX_CONSIDERED
+        config.dirichlet_fraction if use_dirichlet else 0.0,  # P_NOISE_FRACTION
+    )
 
 
 def visit_policy(visit_counts: np.ndarray, legal: np.ndarray, temperature: float) -> np.ndarray:
@@ -105,6 +108,7 @@ def _raise_for(status: int, simulation: int, reward: np.ndarray, value: np.ndarr
 
 
 _NO_DRAWS = np.zeros((0, 0))
+_FLOAT_DTYPES = (np.dtype(np.float64), np.dtype(np.float32))  # `in` hits by identity first: cheaper than .char
 _NO_UNIFORMS = np.zeros(0)
 
 
@@ -139,8 +143,7 @@ def run_search(
         q_values = np.empty((batch, num_actions), dtype=np.float32)
         sampled = not config.gumbel and temperature > 0
         uniforms = rng.random(batch) if sampled else _NO_UNIFORMS  # the draws of sample_actions
-        K.finish(ws.tree_f, ws.tree_i, float(temperature), uniforms, visit_counts, policy, action, search_value,
-                 q_values)
+        K.finish(ws.mem, float(temperature), uniforms, visit_counts, policy, action, search_value, q_values)
     finally:
         ws.release()
     return SearchOutput(visit_counts=visit_counts, policy=policy, action=action, root_value=search_value,
@@ -150,8 +153,8 @@ def run_search(
 def _run_simulations(ws: Workspace, logits: np.ndarray, value: np.ndarray, legal: np.ndarray, draws: np.ndarray,
                      recurrent_fn: RecurrentFn, sims: int, value_prefix: bool) -> None:
     """Expand the roots, then `sims` x (one recurrent_fn call + one kernel call)."""
-    tree_f, tree_i, sel, store, io = ws.tree_f, ws.tree_i, ws.sel, ws.latents.store, ws.latents.io
-    status = K.init_roots(tree_f, tree_i, sel, store, io, logits, value, legal, draws)
+    mem, sel = ws.mem, ws.sel
+    status = K.init_roots(mem, logits, value, legal, draws)
     if status == L.NO_LEGAL:
         raise ValueError("every root needs at least one legal action")
     if status != L.OK:
@@ -159,16 +162,22 @@ def _run_simulations(ws: Workspace, logits: np.ndarray, value: np.ndarray, legal
     batch, num_actions = logits.shape
     actions = sel[L.SEL_ACTION]  # view: the kernels update it in place
     reset = sel[L.SEL_RESET]
-    # Hot loop: everything bound to locals; the kernel checks shapes and finiteness.
-    step, outputs = K.expand_backup_select, _model_outputs
+    # Hot loop: everything bound to locals, no calls but the model, the staging copy and
+    # the kernel; the kernel checks shapes and finiteness, the loop only that the outputs
+    # are float arrays of the right rank (anything else goes through _model_outputs).
+    step, outputs, ndarray, floats = K.expand_backup_select, _model_outputs, np.ndarray, _FLOAT_DTYPES
     stage, latents_in = ws.latents.stage, ws.latents.gathered_latents
     for s in range(sims):
         if value_prefix:
             out = recurrent_fn(latents_in, actions, reset != 0)
         else:
             out = recurrent_fn(latents_in, actions)
-        reward, leaf_value, leaf_logits, next_latents = outputs(out, batch, num_actions)
+        reward, leaf_value, leaf_logits, next_latents = out
+        if not (type(reward) is ndarray and type(leaf_value) is ndarray and type(leaf_logits) is ndarray
+                and reward.ndim == 1 and leaf_value.ndim == 1 and leaf_logits.ndim == 2
+                and reward.dtype in floats and leaf_value.dtype in floats and leaf_logits.dtype in floats):
+            reward, leaf_value, leaf_logits, next_latents = outputs(out, batch, num_actions)
         stage(next_latents)
-        status = step(tree_f, tree_i, sel, store, io, reward, leaf_value, leaf_logits, s + 1, s + 1 < sims)
+        status = step(mem, reward, leaf_value, leaf_logits, s + 1, s + 1 < sims)
         if status != L.OK:
             _raise_for(status, s, reward, leaf_value, leaf_logits, batch, num_actions)

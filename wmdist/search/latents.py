@@ -1,14 +1,14 @@
-"""Latent store: every node's latent kept as raw bytes in one preallocated [B, N, W] buffer.
+"""Latent store: every node's latent kept as raw bytes in the search buffer ([B, N, W] words).
 
 Leaves (numpy arrays or CPU torch tensors, leading dim B) are packed side by side into a
 row of W 8-byte words (each leaf's slot 8-byte aligned). The numba kernels copy rows in and
-out by node index as uint64 words, so one simulation costs two row copies per batch row
+out by node index as words, so one simulation costs two row copies per batch row
 whatever the dtype, and `recurrent_fn` receives numpy / torch views of the gathered rows
 (torch via from_numpy, zero-copy) in the same nested tuple/list structure as the root
-latents. A store is reused by later searches with the same latent signature.
-"""
+latents. A store is reused by later searches with the same latent signature."""
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -85,6 +85,8 @@ def _numpy_dtype(leaf: Any) -> np.dtype:
 def signature(latents: Any) -> tuple:
     """Hashable description of a latent structure (kinds, dtypes, shapes): equal signatures
     can share one LatentStore."""
+    if type(latents) is np.ndarray:  # the common case, without the general flattening
+        return None, ((False, latents.dtype, latents.shape),)
     leaves, spec = _flatten(latents)
     return _frozen(spec), tuple((_is_tensor(x), x.dtype, tuple(x.shape)) for x in leaves)
 
@@ -98,9 +100,11 @@ def _frozen(spec: Any) -> Any:
 
 
 class LatentStore:
-    """Byte rows of every node's latent for B trees of `num_nodes` nodes."""
+    """Byte rows of the latents of B trees: the layout of one node's row (`words`), and
+    the staging / gathered views of the io rows that `bind` attaches (the per-node rows
+    live in the search buffer, touched only by the kernels)."""
 
-    def __init__(self, root_latents: Any, batch: int, num_nodes: int) -> None:
+    def __init__(self, root_latents: Any, batch: int) -> None:
         leaves, self._spec = _flatten(root_latents)
         slots = []
         offset = 0
@@ -114,22 +118,49 @@ class LatentStore:
             nbytes = int(np.prod(shape, dtype=np.int64)) * dtype.itemsize
             slots.append(_Slot(_is_tensor(leaf), dtype, shape, offset, nbytes))
             offset += -(-nbytes // 8) * 8  # keep every slot 8-byte aligned
-        words = max(offset, 8) // 8
+        self.words = max(offset, 8) // 8  # W
         self._slots = slots
-        self.store = np.zeros((batch, num_nodes, words), dtype=np.uint64)  # [B, N, W]
-        self.io = np.zeros((2, batch, words), dtype=np.uint64)  # [2, B, W]: staged, gathered
-        self._staged_views = [self._typed_view(self.io[STAGED], s, as_torch=False) for s in slots]
-        gathered_leaves = [self._typed_view(self.io[GATHERED], s) for s in slots]
+        self._first = leaves[0]
+
+    def bind(self, io: np.ndarray) -> None:
+        """Attach the io rows ([2, B, W] 8-byte words: staged, gathered) of a search buffer."""
+        slots = self._slots
+        self._staged_views = [self._typed_view(io[STAGED], s, as_torch=False) for s in slots]
+        gathered_leaves = [self._typed_view(io[GATHERED], s) for s in slots]
         self.gathered_latents, _ = _unflatten(self._spec, gathered_leaves)
         # One leaf (the common case): stage() copies it without flattening, into a torch
         # view for torch leaves (Tensor.copy_ beats np.copyto(view, leaf.numpy()), whose
         # .numpy() alone costs microseconds) or a numpy view for numpy leaves.
-        self._one = None
+        self.stage = self._stage_general
         if self._spec is None:
-            leaf = leaves[0]
-            dst = self._typed_view(self.io[STAGED], slots[0])
-            self._one = (dst, leaf.dtype, tuple(leaf.shape))
-        self.stage(root_latents)
+            self.stage = self._one_leaf_stager(self._typed_view(io[STAGED], slots[0]), self._first)
+        self._first = None
+
+    def _one_leaf_stager(self, dst: Any, root: Any) -> Callable[[Any], None]:
+        """stage() for a single leaf: the checks and the copy inline, the general path
+        for anything that does not look like the root."""
+        general, dtype, shape = self._stage_general, root.dtype, tuple(root.shape)
+        if self._slots[0].is_torch:
+            tensor = torch.Tensor
+
+            def stage_tensor(latents: Any) -> None:
+                # a grad-tracking copy_ would build a graph: the general path detaches
+                if (isinstance(latents, tensor) and latents.dtype is dtype and latents.shape == shape
+                        and not latents.requires_grad):
+                    dst.copy_(latents)
+                else:
+                    general(latents)
+
+            return stage_tensor
+        ndarray = np.ndarray
+
+        def stage_array(latents: Any) -> None:
+            if type(latents) is ndarray and latents.dtype is dtype and latents.shape == shape:
+                dst[...] = latents
+            else:
+                general(latents)
+
+        return stage_array
 
     @staticmethod
     def _typed_view(buf: np.ndarray, slot: _Slot, as_torch: bool = True) -> Any:
@@ -139,20 +170,9 @@ class LatentStore:
         assert np.shares_memory(view, buf)
         return torch.from_numpy(view) if (slot.is_torch and as_torch) else view
 
-    def stage(self, latents: Any) -> None:
-        """Copy `latents` (same structure, shapes and kinds as the roots) into the staging row."""
-        one = self._one
-        try:
-            if one is not None and latents.dtype is one[1] and latents.shape == one[2]:
-                if self._slots[0].is_torch:
-                    if not latents.requires_grad:  # a grad-tracking copy_ would build a graph
-                        one[0].copy_(latents)
-                        return
-                else:
-                    one[0][...] = latents
-                    return
-        except AttributeError:  # not an array: the checks below say what is wrong
-            pass
+    def _stage_general(self, latents: Any) -> None:
+        """Copy `latents` (same structure, shapes and kinds as the roots) into the staging
+        row (`stage` is this, or a faster equivalent for a single leaf)."""
         leaves, _ = _flatten(latents)
         if len(leaves) != len(self._slots):
             raise ValueError(f"recurrent_fn returned {len(leaves)} latent leaves, expected {len(self._slots)}")

@@ -1,9 +1,9 @@
-"""Reusable search buffers: the tree, the pending-leaf array and the latent store.
+"""Reusable search buffers: the flat search buffer (`layout.py`) and its latent store.
 
 Allocating and wiring them costs more than a whole B=1 search's tree work, and the
 buffers of a large batch are megabytes of fresh pages, so each thread keeps the last few
 workspaces by shape and reuses them. Reuse needs no clearing: a node's rows are written
-when the node is created (`kernels._new_node`). A workspace in use (a search started from
+when the node is created (`kernels._expand`). A workspace in use (a search started from
 inside a recurrent_fn of the same thread) is never handed out twice.
 """
 from __future__ import annotations
@@ -22,10 +22,9 @@ MAX_CACHED = 4  # workspaces kept per thread (least recently used dropped first)
 
 @dataclass
 class Workspace:
-    tree_f: np.ndarray  # float64 flat tree buffer (layout.py)
-    tree_i: np.ndarray  # int32 flat tree buffer (layout.py)
-    params: np.ndarray  # [P_SIZE] view of tree_f
-    sel: np.ndarray  # [3, B] int64 pending leaf per row: parent, action, reset
+    mem: np.ndarray  # int64 flat search buffer (layout.py)
+    params: np.ndarray  # [P_SIZE] float64 view of mem
+    sel: np.ndarray  # [3, B] int64 view of mem: pending leaf per row (parent, action, reset)
     latents: LatentStore
     busy: bool = False
 
@@ -38,10 +37,12 @@ _local = threading.local()
 
 def _new(batch: int, num_actions: int, table: np.ndarray, root_latents: Any) -> Workspace:
     num_nodes = table.shape[1] + 1  # one node per simulation plus the root
-    tree_f, tree_i = allocate(batch, num_nodes, num_actions, table)
-    params = unpack(tree_f, tree_i)[0]
-    sel = np.zeros((3, batch), dtype=np.int64)
-    return Workspace(tree_f, tree_i, params, sel, LatentStore(root_latents, batch, num_nodes))
+    latents = LatentStore(root_latents, batch)
+    mem = allocate(batch, num_nodes, num_actions, table, latents.words)
+    views = unpack(mem)
+    latents.bind(views["io"])
+    latents.stage(root_latents)
+    return Workspace(mem, views["params"], views["sel"], latents)
 
 
 def acquire(batch: int, num_actions: int, table: np.ndarray, root_latents: Any) -> Workspace:
