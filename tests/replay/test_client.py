@@ -129,6 +129,18 @@ def test_policy_lag_and_bad_input(started):
         c.insert(bad, source_id=0)
 
 
+def _wait_restarted(c: ReplayClient, pid: int) -> None:
+    deadline = time.monotonic() + 60
+    while True:  # Ray restarts the actor; its __init__ rebuilds the index from redis
+        try:
+            if ray.get(c.shards[0].pid.remote(), timeout=10) != pid:
+                return
+        except Exception:
+            pass
+        assert time.monotonic() < deadline, "shard did not come back"
+        time.sleep(0.2)
+
+
 def test_private_redis_and_shard_sigkill(started, tmp_path):
     c = started(_cfg(backend="redis", redis_appendfsync="always", sampler="prioritized"), name="dur")
     server = c._server
@@ -148,15 +160,7 @@ def test_private_redis_and_shard_sigkill(started, tmp_path):
     server.start()
     pid = ray.get(c.shards[0].pid.remote())
     os.kill(pid, signal.SIGKILL)
-    deadline = time.monotonic() + 60
-    while True:  # Ray restarts the actor; its __init__ rebuilds the index from redis
-        try:
-            if ray.get(c.shards[0].pid.remote(), timeout=10) != pid:
-                break
-        except Exception:
-            pass
-        assert time.monotonic() < deadline, "shard did not come back"
-        time.sleep(0.2)
+    _wait_restarted(c, pid)
     after = c.stats()
     for k in ("size_sequences", "size_steps", "shard0_size_sequences", "shard1_size_sequences"):
         assert after[k] == before[k], k
@@ -174,18 +178,6 @@ def test_private_redis_and_shard_sigkill(started, tmp_path):
     d = server.dir
     c.close()
     assert server.proc is None and not any(f.endswith(".pid") for f in os.listdir(d))
-
-
-def _wait_restarted(c: ReplayClient, pid: int) -> None:
-    deadline = time.monotonic() + 60
-    while True:  # Ray restarts the actor; its __init__ rebuilds the index from redis
-        try:
-            if ray.get(c.shards[0].pid.remote(), timeout=10) != pid:
-                return
-        except Exception:
-            pass
-        assert time.monotonic() < deadline, "shard did not come back"
-        time.sleep(0.2)
 
 
 def test_redis_inserts_need_no_shard_and_survive_its_restart(started):

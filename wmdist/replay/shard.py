@@ -21,6 +21,7 @@ import numpy as np
 
 from wmdist.algos.base import FieldSpec
 from wmdist.replay.batch import SequenceBatch, check_field
+from wmdist.replay.draws import is_weights
 from wmdist.replay.storage_memory import MemoryStorage
 from wmdist.replay.sumtree import SumTree
 
@@ -188,14 +189,11 @@ class ReplayShard:
         with self.lock:
             return self.size_sequences, self.tree.total, self.size_steps
 
-    def sample(self, k: int, beta: float = 0.0, global_count: int = 0, global_mass: float = 0.0,
-               fetch: bool = True) -> dict:
-        """k draws; `is_weight` = (N P(i))^-beta with the union's N and mass (not normalised).
-
-        Returns {"slots" [k], "stamps" [k], "is_weight" [k]} plus, with `fetch`, "data" and
-        "mask" [k, T] bool, or without it (durable storage) the record "keys" for the caller
-        to fetch itself.
-        """
+    def sample(self, k: int, beta: float = 0.0, global_count: int = 0, global_mass: float = 0.0) -> dict:
+        """k draws with their rows; `is_weight` = (N P(i))^-beta with the union's N and mass
+        (not normalised). Returns {"slots" [k], "stamps" [k], "is_weight" [k], "data"
+        {field: [k, T, ...]}, "mask" [k, T] bool}. (A reader that fetches records itself
+        uses `draw`.)"""
         if k < 0:
             raise ValueError(f"sample size must be >= 0, got {k}")
         self.drain()
@@ -203,32 +201,23 @@ class ReplayShard:
             if self.tree.total <= 0:
                 raise ValueError(f"replay shard {self.shard_id} is empty")
             slots = self.tree.sample(k, self.rng)
-            out: dict = {}
-            if fetch:
-                out["data"] = {f: np.zeros((k, self.T, *s.shape), dtype=s.dtype) for f, s in self.fields.items()}
-                out["mask"] = np.zeros((k, self.T), dtype=bool)
-                todo = np.arange(k)
-                while todo.size:
-                    data, mask, bad = self.storage.read(slots[todo])
-                    good = np.setdiff1d(np.arange(todo.size), bad)
-                    for f in out["data"]:
-                        out["data"][f][todo[good]] = data[f][good]
-                    out["mask"][todo[good]] = mask[good]
-                    if bad.size:  # unreadable in storage: forget the slot, count it, draw again
-                        self._drop(np.unique(slots[todo[bad]]))
-                        if self.tree.total <= 0:
-                            raise ValueError(f"replay shard {self.shard_id} is empty")
-                        slots[todo[bad]] = self.tree.sample(bad.size, self.rng)
-                    todo = todo[bad]
-            else:
-                out["keys"] = self.storage.key_of(slots)
-            if self.prioritized and beta > 0:
-                n = global_count or self.size_sequences
-                total = global_mass or self.tree.total
-                p = self.tree.get(slots) / total  # P(i), Schaul et al. 2016 Eq. 1
-                w = np.power(n * p, -beta)  # w_i = (N P(i))^-beta, Sec. 3.4
-            else:
-                w = np.ones(k)
+            out: dict = {"data": {f: np.zeros((k, self.T, *s.shape), dtype=s.dtype) for f, s in self.fields.items()},
+                         "mask": np.zeros((k, self.T), dtype=bool)}
+            todo = np.arange(k)
+            while todo.size:
+                data, mask, bad = self.storage.read(slots[todo])
+                good = np.setdiff1d(np.arange(todo.size), bad)
+                for f in out["data"]:
+                    out["data"][f][todo[good]] = data[f][good]
+                out["mask"][todo[good]] = mask[good]
+                if bad.size:  # unreadable in storage: forget the slot, count it, draw again
+                    self._drop(np.unique(slots[todo[bad]]))
+                    if self.tree.total <= 0:
+                        raise ValueError(f"replay shard {self.shard_id} is empty")
+                    slots[todo[bad]] = self.tree.sample(bad.size, self.rng)
+                todo = todo[bad]
+            w = is_weights(self.tree.get(slots), global_count or self.size_sequences,
+                           global_mass or self.tree.total, beta if self.prioritized else 0.0)
             self.counters["samples"] += k
             out.update(is_weight=w.astype(np.float32), slots=slots, stamps=self.stamp[slots].copy())
             return out

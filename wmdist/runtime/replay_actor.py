@@ -54,10 +54,6 @@ class ShardActor:
     def insert(self, batch: SequenceBatch, min_version: int | None) -> int:
         return self.shard.insert(batch, min_version)
 
-    def insert_keys(self, keys: list[str], version: np.ndarray, episode: np.ndarray, steps: np.ndarray,
-                    lag_drops: int) -> int:
-        return self.shard.insert_keys(keys, version, episode, steps, lag_drops)
-
     def draw(self, k: int) -> dict:
         return self.shard.draw(k)
 
@@ -67,8 +63,8 @@ class ShardActor:
     def mass(self) -> tuple[int, float, int]:
         return self.shard.mass()
 
-    def sample(self, k: int, beta: float, global_count: int, global_mass: float, fetch: bool = True) -> dict:
-        return self.shard.sample(k, beta, global_count, global_mass, fetch)
+    def sample(self, k: int, beta: float, global_count: int, global_mass: float) -> dict:
+        return self.shard.sample(k, beta, global_count, global_mass)
 
     def update_priorities(self, slots: np.ndarray, stamps: np.ndarray, priorities: np.ndarray) -> int:
         return self.shard.update_priorities(slots, stamps, priorities)
