@@ -369,8 +369,9 @@ class ReplayClient:
         return applied
 
     def set_policy_version(self, version: int) -> None:
-        """The learner's latest published version (drives `max_policy_lag`)."""
-        self.limiter.set_version.remote(int(version))
+        """The learner's latest published version (drives `max_policy_lag`). Waited for: the
+        limiter is a threaded actor, so a later call of this client could otherwise overtake it."""
+        ray.get(self.limiter.set_version.remote(int(version)))
 
     # -- stats, checkpoints, shutdown ---------------------------------------------------
     def stats(self) -> dict[str, float]:
