@@ -86,6 +86,7 @@ class DreamerConfig:
     cont_scale: float = param(1.0, "continue loss scale", ge=0)
     # --- behaviour -------------------------------------------------------------------
     horizon: int = param(15, "imagination horizon H", ge=1)
+    imag_starts: int = param(0, "imagine from at most this many posterior states, drawn at random from the batch (0 = all, as the papers)", ge=0)
     discount: float | None = param(None, "discount gamma (V3: 1 - 1/333)", gt=0, le=1)
     lam: float = param(0.95, "lambda of the lambda-returns", ge=0, le=1)
     actor_grad_disc: str | None = param(None, "actor gradient for discrete actions", choices=("reinforce", "backprop"))

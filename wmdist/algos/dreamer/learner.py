@@ -97,8 +97,13 @@ class DreamerLearner(Learner):
             model_loss=float(loss.detach()), recon_loss=float(masked_mean(recon.detach(), weight)),
             reward_loss=float(masked_mean(rew_l.detach(), weight)), kl_dyn=float(dyn), kl_rep=float(rep),
         )
-        valid = t["mask"].flatten() > 0  # imagine only from real steps
-        start = Start(h.detach()[valid], _select(z.detach(), valid), cont_target.flatten()[valid])
+        rows = torch.nonzero(t["mask"].flatten() > 0).squeeze(-1)  # imagine only from real steps
+        if 0 < cfg.imag_starts < rows.numel():
+            # a random subset: the actor-critic cost scales with the starts, its gradient is an
+            # average over starts x H states, so fewer starts mostly add noise, not bias
+            pick = torch.randperm(rows.numel(), generator=self.generator, device=rows.device)[: cfg.imag_starts]
+            rows = rows[pick]
+        start = Start(h.detach()[rows], _select(z.detach(), rows), cont_target.flatten()[rows])
         return loss, metrics, start
 
     # --- Learner API ----------------------------------------------------------------
@@ -143,6 +148,6 @@ class DreamerLearner(Learner):
 
 
 def _select(lat: Latent, rows: torch.Tensor) -> Latent:
-    """The states where `rows` [N] is True."""
+    """The states `rows` (indices [K] or a mask [N])."""
     pick = lambda x: None if x is None else x[rows]  # noqa: E731
     return Latent(pick(lat.index), pick(lat.probs), pick(lat.sample), lat.classes)
