@@ -87,3 +87,23 @@ def test_bf16_losses_within_sampling_noise_of_fp32():
     noise = fp32.std(0) + 1e-3 * np.abs(fp32.mean(0))  # spread from latent / imagination sampling alone
     same_seed_gap = np.abs(bf16 - fp32).mean(0)
     assert np.all(same_seed_gap < 3 * noise + 0.02 * np.abs(fp32.mean(0))), (same_seed_gap, noise)
+
+
+def test_imag_starts_draws_that_many_distinct_real_states():
+    spec = bench_spec(False)
+    batch = random_batch(spec, 3, 6)
+    batch["mask"][2, 3:] = False  # padding is never a start
+
+    def starts(imag_starts):
+        learner = Dreamer(spec, tiny_config(3, imag_starts=imag_starts)).make_learner()
+        learner.generator.manual_seed(0)  # same posterior samples, so the same observed states
+        return learner.world_model_loss(learner._tensors(batch))[2]
+
+    every, some, more = starts(0), starts(7), starts(100)
+    assert every.deter.shape[0] == 15  # 18 steps, 3 of them padding
+    assert some.deter.shape[0] == 7 and some.cont.shape == (7,)
+    # each drawn start is one of the real states, and none is drawn twice
+    key = lambda s: torch.cat([s.deter, s.latent.index.float()], -1)  # noqa: E731 (h alone repeats at window starts)
+    match = (key(some)[:, None, :] == key(every)[None, :, :]).all(-1)  # [7, 15]
+    assert (match.sum(1) == 1).all() and (match.sum(0) <= 1).all()
+    assert more.deter.shape[0] == 15  # more starts than real states: all of them
