@@ -129,6 +129,29 @@ def _twohot_case(n: int = 7680, reps: int = 5) -> dict:
             "speedup": round(times["dense"] / times["ours"], 2)}
 
 
+def _imag_starts_case(b: int, t: int, quick: bool) -> dict:
+    """The dm_control preset's model (continuous, backprop through the dynamics): imagining
+    from every posterior state vs from 128 of them, updates interleaved."""
+    spec = bench_spec(False)
+    batch = random_batch(spec, b, t)
+    starts = {"all": 0, "128": 128}
+    learners = {k: Dreamer(spec, DreamerConfig(version=3, deter=128, units=128, mlp_layers=2, stoch=32, classes=32,
+                                              imag_starts=n)).make_learner() for k, n in starts.items()}
+    times = {k: 0.0 for k in starts}
+    for learner in learners.values():
+        learner.update(batch)  # warm-up
+    reps = 1 if quick else 3
+    for _ in range(reps):
+        for k, learner in learners.items():
+            t0 = time.perf_counter()
+            learner.update(batch)
+            times[k] += time.perf_counter() - t0
+    return {"case": "v3_dmc_preset_continuous_imag_starts", "units": 128, "deter": 128, "batch": f"{b}x{t}",
+            "seconds_per_update_all_starts": round(times["all"] / reps, 3),
+            "seconds_per_update_128_starts": round(times["128"] / reps, 3),
+            "speedup": round(times["all"] / times["128"], 2)}
+
+
 def _time_updates(learner, batch, updates: int) -> float:
     learner.update(batch)  # warm-up
     t0 = time.perf_counter()
@@ -173,6 +196,7 @@ def run(quick: bool = False) -> Iterator[dict]:
     yield {"case": "v3_cartpole_preset_discrete_fp32", "units": 128, "deter": 128, "batch": f"{pb}x{pt}",
            "threads": threads, "updates_per_s": round(1.0 / dt, 3), "seconds_per_update": round(dt, 3),
            "phase_seconds": {k: round(v, 3) for k, v in _split(learner, batch).items()}}
+    yield _imag_starts_case(pb, pt, quick)
     yield _twohot_case(1024 if quick else 7680)
     # bf16 autocast vs fp32, side by side at a reduced batch
     sb, st = 2, 16
