@@ -91,6 +91,27 @@ def test_limiter_held_across_shards(started):
     assert st["sample_wait_seconds"] >= 0.4 and st["insert_wait_seconds"] > 0.1
 
 
+@pytest.mark.parametrize("backend", ["memory", "redis"])
+def test_held_counts_are_sent_before_anything_reads_or_waits_on_them(started, backend):
+    """Ratio off: insert counts are coalesced on the caller's thread (no timer), and a sample
+    waiting for min_size, stats and a copy's close send what this copy still holds."""
+    c = started(_cfg(backend=backend, min_size=4 * T))
+    assert c.insert(make_batch(2), source_id=0)  # the first count goes at once
+    c._inserts.every = 3600.0  # from now on held until something flushes (no timer would send them)
+    assert c.insert(make_batch(2, start=2), source_id=1)
+    assert c._inserts.pending == (2, 2 * T)
+    assert c.sample(3, timeout=5) is not None  # min_size needs both inserts: sent before waiting
+    for i in range(5):
+        assert c.insert(make_batch(1, start=4 + i), source_id=i)
+    assert c._inserts.pending == (5, 5 * T)
+    assert c.stats()["limiter_inserted"] == 9  # nothing left held behind stats
+    copy = pickle.loads(pickle.dumps(c))
+    for i in range(2):
+        assert copy.insert(make_batch(1, start=9 + i), source_id=i)
+    copy.close()
+    assert c.stats()["limiter_inserted"] == 11 and c.stats()["limiter_size_steps"] == 11 * T
+
+
 def test_close_unblocks_waiters_and_checkpoint_round_trip(started, tmp_path):
     c = started(_cfg(shards=1, min_size=10**6, sampler="prioritized"))
     out = []
@@ -193,6 +214,33 @@ def test_redis_inserts_need_no_shard_and_survive_its_restart(started):
     assert set(_ids(c.sample(300))) == set(range(6))
     with pytest.raises(ValueError, match="no real step"):  # refused before anything is written
         c.insert(make_batch(1, start=9, steps=np.array([0])), source_id=2)
+
+
+def test_redis_insert_swept_before_its_announcement_is_written_again(started, monkeypatch):
+    """A shard restart can sweep an insert's records between its SETs and its announcement:
+    the announcement is refused and the client writes the records again, under new keys."""
+    from wmdist.replay import storage_redis
+
+    c = started(_cfg(backend="redis", shards=1), name="swept")
+    refused = []
+
+    def commit_swept_once(r, writes):
+        if refused:
+            return storage_redis.commit_records(r, writes)
+        ns, recs, entry = writes[0]
+        storage_redis.put_records(r, recs)
+        r.delete(next(iter(recs)))  # the sweep of a restarting shard
+        refused.append(list(recs))
+        assert r.eval(storage_redis._ANNOUNCE, len(recs) + 1, *recs, f"{ns}:pending", entry) == 0
+        return [0]
+
+    monkeypatch.setattr(replay_client, "commit_records", commit_swept_once)
+    assert c.insert(make_batch(4), source_id=0)
+    st = c.stats()
+    assert refused and st["size_sequences"] == 4 and st["drops_corrupt"] == 0
+    assert set(_ids(c.sample(200))) == set(range(4))
+    left = [k.decode() for k in c.redis.scan_iter(match=f"{c._namespaces[0]}:r:*")]
+    assert len(left) == 4 and not set(left) & set(refused[0])  # the first attempt left nothing
 
 
 def test_redis_sample_sees_own_writes_and_redraws_stale_draws(started, monkeypatch):

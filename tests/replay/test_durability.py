@@ -97,7 +97,7 @@ def test_direct_insert_straddling_a_shard_restart_is_refused_not_lost(redis_serv
 
 
 def _announce(r, ns: str, batch: SequenceBatch, lag: int = 0) -> list[str]:
-    """A client's insert: the records and a pending entry in one MULTI/EXEC (acknowledged)."""
+    """A client's insert: the records, then its pending entry (`commit_records`; acknowledged)."""
     keys = new_keys(ns, len(batch))
     entry = pending_entry(keys, batch.version, batch.episode_id, batch.mask.sum(1), lag)
     commit_records(r, [(ns, dict(zip(keys, encode_rows(batch, np.arange(len(batch))))), entry)])

@@ -85,3 +85,48 @@ def test_encode_refuses_a_wrong_schema():
     b = make_batch(1)
     with pytest.raises(ValueError, match="'obs'"):
         layout.encode_rows({**b.data, "obs": b.data["obs"].astype(np.float64)}, b.mask, [{"steps": T}])
+
+
+@pytest.mark.parametrize("kind", ["small", "big"])
+def test_a_batch_mixing_good_and_bad_records_decodes_each_row_like_the_reference(kind):
+    """The batch decode (one pattern match, one tail pass and one cut for the batch) against
+    the checked decoder row by row, with bad, missing and repeated records among good ones."""
+    fields, batch = (FIELDS, make_batch(8, steps=np.array([T, 1, 3, T, 5, 2, 7, 4]))) if kind == "small" else (
+        BIG, _big_batch(4, seed=2))
+    layout = layout_for(schema_of(fields, T))
+    good = encode_rows(batch, np.arange(len(batch)))
+    arrs, meta = decode_checked(good[0], fields, T)
+    bad = [
+        good[1] + b"\x00",  # a byte after the metadata
+        good[1][:len(good[1]) - 1],  # the metadata cut short
+        good[2][:layout.end] + msgpack.packb("m") + msgpack.packb([1, 2]),  # metadata not a map
+        encode_record(arrs, {**meta, "steps": float(meta["steps"])}),  # steps not an int
+        bytearray(good[3])[:-1] + b"",  # not bytes, and cut short
+    ]
+    rows = [good[0], bad[0], None, good[1], bad[1], good[0], bad[2], bytearray(good[2]), bad[3], bad[4], *good[2:]]
+    out, state, metas = layout.decode_many(rows)
+    for r, raw in enumerate(rows):
+        try:
+            want, want_meta = decode_checked(bytes(raw), fields, T) if raw is not None else (None, None)
+        except Exception:  # noqa: BLE001 - the reference refuses it: so must the batch decode
+            want, want_meta = None, None
+        assert state[r] == (1 if raw is None else 0 if want is not None else 2), r
+        assert metas[r] == want_meta, r
+        for f in (*fields, "_mask"):
+            assert np.array_equal(out[f][r], want[f] if want is not None else np.zeros_like(out[f][r])), (r, f)
+    assert (state == 0).sum() == len(good) + 2  # each good record, good[0] twice and the bytearray copy
+
+
+@pytest.mark.parametrize("kind", ["small", "big"])
+def test_all_template_records_with_one_inconsistent_row(kind):
+    """Every record matches the template (the whole-batch cut) but one's metadata disagrees
+    with its mask: that row alone is refused and zeroed."""
+    fields, batch = (FIELDS, make_batch(5)) if kind == "small" else (BIG, _big_batch(3, seed=3))
+    layout = layout_for(schema_of(fields, T))
+    raws = encode_rows(batch, np.arange(len(batch)))
+    arrs, meta = decode_checked(raws[1], fields, T)
+    raws[1] = encode_record(arrs, {**meta, "steps": meta["steps"] % T + 1})
+    out, state, metas = layout.decode_many(raws)
+    assert state.tolist() == [0, 2] + [0] * (len(raws) - 2) and metas[1] is None
+    assert not any(out[f][1].any() for f in out)
+    assert np.array_equal(out["_mask"][0], batch.mask[0]) and np.array_equal(out["_mask"][2], batch.mask[2])

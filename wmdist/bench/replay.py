@@ -6,11 +6,13 @@ reports inserts and samples per second and MB/s through the real service (Ray ac
 limiter off), next to the raw limit for the same bytes: a numpy copy (memory backend) or
 redis-py pipelined SET / GET of one blob per sequence (redis backend; a raw sample also cuts
 its blobs into the batch arrays, and the GET alone is reported too); figures are medians
-over rounds that alternate service and raw calls, so machine load hits both alike. Also the
+over rounds that alternate service and raw calls, so machine load hits both alike (the
+cyclic GC paused while timing, since its pauses land on either side at random). Also the
 memory per stored step against the raw bytes per step.
 """
 from __future__ import annotations
 
+import gc
 import os
 import tempfile
 import time
@@ -119,7 +121,7 @@ def _case(kind: str, shards: int, backend: str, quick: bool, run_dir: str) -> di
     fields = _fields(kind)
     ins_batch = 32 if kind == "vector" else 8  # sequences per insert call
     sample_b = 32 if kind == "vector" else 16
-    reps = (6 if quick else 24) if kind == "vector" else (4 if quick else 12)
+    reps = (6 if quick else 64) if kind == "vector" else (4 if quick else 24)  # medians of many rounds
     capacity_seq = ins_batch * (reps + 1) * 2
     cfg = ReplayConfig(backend=backend, shards=shards, capacity_steps=capacity_seq * T, seq_len=T,
                        min_size=0, samples_per_insert=0, shard_cpus=0.1)
@@ -134,7 +136,10 @@ def _case(kind: str, shards: int, backend: str, quick: bool, run_dir: str) -> di
         client.insert(batches[-1], source_id=0)  # warm up actors and connections
         client.sample(sample_b)
         raw = _RawNumpy(batches[0], capacity_seq) if backend == "memory" else _RawRedis(rc, batches[0])
-        # rounds alternate service and raw calls on the same bytes, so load noise hits both
+        # rounds alternate service and raw calls on the same bytes, so load noise hits both; the
+        # cyclic GC is paused while timing (its pauses land on either side at random)
+        gc.collect()
+        gc.disable()
         ins, raw_ins = [], []
         for i in range(reps):
             ins.append(_time(lambda: client.insert(batches[i], source_id=i)))
@@ -148,6 +153,7 @@ def _case(kind: str, shards: int, backend: str, quick: bool, run_dir: str) -> di
             if backend == "redis":
                 raw_bytes.append(_time(lambda: raw.get_bytes(sample_b, i)))
     finally:
+        gc.enable()
         if isinstance(raw, _RawRedis):
             raw.close()
         client.close()

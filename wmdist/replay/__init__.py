@@ -11,20 +11,28 @@ Where the bytes go (a Ray actor call costs ~1-5 ms and copies what it carries):
   the shard copies them once into its preallocated ring arrays. A sample is one call per
   shard returning the gathered rows `[k, T, ...]`.
 - redis backend: bytes never go through Ray, and neither a shard nor any Ray call sits on
-  the insert path or (most of the time) the sample path. An insert is one MULTI/EXEC from
-  the client: the records (msgpack, encoded through a precomputed `layout.RecordLayout`) and
-  one small entry per destination shard on that shard's pending list; it is acknowledged
-  when redis answers (after fsync under `appendfsync always`). Shards index pending entries
+  the insert path or (most of the time) the sample path. An insert is one pipeline from the
+  client, no transaction: the records (msgpack, encoded through a precomputed
+  `layout.RecordLayout`; one SET each when big, so redis runs them while the rest is still
+  on the wire), then per destination shard a small script that pushes one entry on that
+  shard's pending list if all its records are there (`storage_redis.commit_records`). It is
+  acknowledged when redis answers (after fsync under `appendfsync always`); records whose
+  entry never got pushed (a crash in between) are deleted by the shard's next load, never
+  indexed. Shards index pending entries
   on their next read and on a 0.2 s tick (index + LTRIM in one transaction, so exactly once;
   a restarted shard indexes them too). A sample takes (slot, stamp, key, mass) draws from
-  per-shard pools (`draws.DrawPool`) that the client refills with one shard call per ~8
-  samples, sent ahead so it is back in time, then reads the records with one MGET. A
-  client's own insert or write-back voids its pools (read your writes); draws are at most
-  a second old; a pooled draw whose record was evicted since is drawn again.
-- Both: one rate-limiter call per insert and per sample. An insert waits for it only when
-  the ratio or `max_policy_lag` is on, a sample only while the ratio is on or `min_size` is
-  not reached yet; otherwise the counts are sent without waiting (warm sample counts at
-  most every 50 ms). Memory: one `mass` call per
+  per-shard pools (`draws.DrawPools`): each shard is asked for ~16 samples' worth at a time,
+  16 samples before they are needed, so a shard call is on the sample's path only when a
+  pool runs short (and then it is that request, back long since). Then one MGET of the
+  records, decoded for the whole batch (`layout.RecordLayout.decode_many`). A client's own
+  insert or write-back voids its pools (read your writes); draws are at most a second old
+  (counted from the request); a pooled draw whose record was evicted since is drawn again.
+- Both: an insert waits for the rate limiter only when the ratio or `max_policy_lag` is
+  on, a sample only while the ratio is on or `min_size` is not reached yet; otherwise the
+  counts gate nothing and are summed and sent without waiting at most every 50 ms
+  (`coalesce.Coalescer`, on the caller's own thread: no timer thread calls into Ray), and
+  always before a blocking limiter call; stats, a checkpoint, close and a copy's first
+  count wait until the limiter applied them (a threaded actor may reorder calls). Memory: one `mass` call per
   shard when S > 1 (redis: the pools carry each shard's size and mass) to split B by size
   or priority mass. Write-backs go through the shard (stamp check, then a patch of the
   stored record), one call per shard.

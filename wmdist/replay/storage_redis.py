@@ -6,28 +6,30 @@ Keys are namespaced by run and shard (`wmdist:<run>:s<shard>:...`):
   `_mask`, and metadata version / episode / steps). Tokens are unique, so a key never
   changes meaning: a reader holding an old key finds the old record or nothing.
 - `...:pending` list: msgpack [keys, versions, episodes, steps, policy-lag drops], one entry
-  per client insert, pushed in the same MULTI/EXEC as the records (`commit_records`); the
-  shard indexes and trims it (`read_pending`, `register(consumed=...)`);
+  per client insert, pushed after its records by a script that checks they are all there
+  (`commit_records`); the shard indexes and trims it (`read_pending`, `register(consumed=...)`);
 - `...:idx`  hash slot -> msgpack [key, stamp, version, episode, steps]: the shard's index;
 - `...:prio` hash slot -> priority (raw, before alpha);
 - `...:meta` hash: `count` (sequences ever indexed; the next slot is count % capacity),
   `capacity`, `seq_len` (a restart with another layout is refused).
 
 Data path: record bytes can be written and read by any process (`commit_records`,
-`fetch_records`: one MULTI/EXEC of SETs + the pending entries / one MGET), so collectors and
+`fetch_records`: one pipeline of SETs + the announcements / one MGET), so collectors and
 the learner move bytes to and from redis directly while the shard actor only indexes keys.
 Records of one schema are encoded and decoded through a precomputed `RecordLayout` (the
 codec's bytes, without walking msgpack per array). The shard's own `write` (used
 in-process) is records + register in one MULTI/EXEC.
 
-Durability: a client insert is acknowledged once its MULTI/EXEC (records + pending entry)
-returns; under `appendfsync always` that is after fsync. The shard indexes pending entries
-later: `register` is one MULTI/EXEC (index, priorities, count, DEL of the records it
+Durability: a client insert (`commit_records`: a pipeline of SETs, then a small script that
+pushes the pending entry only if every record is there) is acknowledged once it returns;
+under `appendfsync always` that is after the fsync covering all of it. The shard indexes
+pending entries later: `register` is one MULTI/EXEC (index, priorities, count, DEL of the records it
 evicts, LTRIM of the entries it consumed), so an entry is indexed exactly once even if the
 shard dies half-way. `load()` rebuilds the index and priorities after a restart, skips and
 counts records that fail to decode, and deletes records that neither the index nor a
-pending entry names (written by an insert that was never acknowledged); the shard then
-indexes the pending entries, so acknowledged inserts survive a shard restart.
+pending entry names (written by an insert that was never announced, so never acknowledged;
+`_sweep` makes that safe against inserts running meanwhile); the shard then indexes the
+pending entries, so acknowledged inserts survive a shard restart.
 """
 from __future__ import annotations
 
@@ -71,32 +73,66 @@ class _Spec:  # FieldSpec-like view of an array column (shape without [N, T])
         self.shape, self.dtype = tuple(shape), dtype
 
 
-def encode_rows(batch: SequenceBatch, rows: np.ndarray) -> list[bytes]:
-    """One record per selected window of the batch (`codec.encode_record` bytes)."""
-    rows = np.asarray(rows, np.int64)
-    steps = batch.mask[rows].sum(axis=1)
-    meta = [{"version": int(batch.version[r]), "episode": int(batch.episode_id[r]), "steps": int(n)}
-            for r, n in zip(rows, steps)]
-    return batch_layout(batch).encode_rows({k: v[rows] for k, v in batch.data.items()}, batch.mask[rows], meta)
+def encode_rows(batch: SequenceBatch, rows: np.ndarray, steps: np.ndarray | None = None) -> list[bytes]:
+    """One record per selected window of the batch (`codec.encode_record` bytes), copied
+    straight from the batch's arrays; `steps` [N]: real steps per window if known."""
+    rows = np.asarray(rows, np.int64).tolist()
+    steps = (batch.mask.sum(axis=1) if steps is None else steps).tolist()
+    version, episode = batch.version.tolist(), batch.episode_id.tolist()
+    meta = [{"version": version[r], "episode": episode[r], "steps": steps[r]} for r in rows]
+    return batch_layout(batch).encode_rows(batch.data, batch.mask, meta, rows)
 
 
 def pending_entry(keys: list[str], version: np.ndarray, episode: np.ndarray, steps: np.ndarray,
                   lag_drops: int = 0) -> bytes:
     """The announcement of one client insert to a shard (see `...:pending`)."""
-    return msgpack.packb([list(keys), [int(x) for x in version], [int(x) for x in episode],
-                          [int(x) for x in steps], int(lag_drops)])
+    cols = [np.asarray(c, np.int64).tolist() for c in (version, episode, steps)]
+    return msgpack.packb([list(keys), *cols, int(lag_drops)])
 
 
-def commit_records(r: redis.Redis, writes: list[tuple[str, dict[str, bytes], bytes]]) -> None:
-    """One MULTI/EXEC: every shard's records (MSET) and its pending entry (namespace, records,
-    entry). Atomic, so a restarting shard sees both or neither; acknowledged on return."""
+# A client insert's index write: announce the records to their shard (RPUSH of the pending
+# entry) only if every one of them is there. KEYS: the records, then the pending list; ARGV:
+# the entry. A restarting shard deletes records that nothing names (`RedisStorage.load`); if
+# it did between this insert's SETs and this script, the insert is refused (0) and whatever
+# is left of its records deleted, so nothing half-written ever becomes visible.
+_ANNOUNCE = b"""
+local n = #KEYS - 1
+for i = 1, n do
+  if redis.call('EXISTS', KEYS[i]) == 0 then
+    for j = 1, n do redis.call('DEL', KEYS[j]) end
+    return 0
+  end
+end
+redis.call('RPUSH', KEYS[n + 1], ARGV[1])
+return 1
+"""
+
+
+BIG_WRITE = 1 << 20  # bytes: above, an insert's records go as one SET each (see `commit_records`)
+
+
+def commit_records(r: redis.Redis, writes: list[tuple[str, dict[str, bytes], bytes]]) -> list[int]:
+    """Write every shard's records, then announce each shard's (`writes`: namespace, records,
+    pending entry) -> indices of the writes refused (their records were swept by a shard
+    restart in between: write them again under new keys).
+
+    One pipeline, no transaction: the SETs are run as their bytes arrive (a MULTI/EXEC would
+    hold megabytes of pixels until EXEC), and the small `_ANNOUNCE` script after them makes
+    each shard's records visible at once, only if all of them are there. Acknowledged when it
+    returns; under `appendfsync always` redis replies after the fsync that covers every
+    command before. A crash before the announcement leaves records nothing names: the
+    shard's next `load` deletes them (counted `unacked`)."""
+    p = r.pipeline(transaction=False)  # (records may be empty: an insert whose rows all lagged)
     records = {k: v for _, recs, _ in writes for k, v in recs.items()}
-    p = r.pipeline(transaction=True)
-    if records:
-        p.mset(records)  # one command: redis parses and queues less than one SET per record
-    for ns, _, entry in writes:
-        p.rpush(f"{ns}:pending", entry)
-    p.execute()
+    if records and sum(map(len, records.values())) <= BIG_WRITE:
+        p.mset(records)  # small: one command parses and runs cheaper than one per record
+    else:
+        for k, v in records.items():
+            p.set(k, v)  # big: redis runs each record's SET while the next is still on the wire
+    for ns, recs, entry in writes:
+        p.eval(_ANNOUNCE, len(recs) + 1, *recs, f"{ns}:pending", entry)
+    replies = p.execute()  # raises: not acknowledged (announced or not, it is never half-visible)
+    return [i for i, ok in enumerate(replies[len(replies) - len(writes):]) if ok != 1]
 
 
 def new_keys(namespace: str, n: int) -> list[str]:
@@ -129,25 +165,19 @@ def decode_checked(raw: bytes, fields: dict[str, FieldSpec], seq_len: int) -> tu
     return arrs, meta
 
 
-def fetch_records(r: redis.Redis, keys: list[str], fields: dict[str, FieldSpec], seq_len: int):
+def fetch_records(r: redis.Redis, keys: list[str], fields: dict[str, FieldSpec], seq_len: int,
+                  layout: RecordLayout | None = None):
     """One MGET of the distinct keys -> (fields [B, T, ...], mask [B, T] bool,
-    missing rows (key gone: evicted since it was drawn), corrupt rows)."""
+    missing rows (key gone: evicted since it was drawn), corrupt rows). `layout`: the
+    fields' `RecordLayout` if the caller keeps one (saves building the schema per call)."""
     uniq = list(dict.fromkeys(keys))
     raws = r.mget(uniq) if uniq else []
-    out, state = decode_records(raws, fields, seq_len)
+    if len(uniq) < len(keys):  # a key drawn twice: decode its bytes into each row (no regather)
+        got = dict(zip(uniq, raws))
+        raws = [got[k] for k in keys]
+    out, state, _ = (layout or layout_for(schema_of(fields, seq_len))).decode_many(raws)
     mask = out.pop("_mask")
-    if len(uniq) == len(keys):  # no duplicates: rows are already in order
-        return out, mask, np.flatnonzero(state == 1), np.flatnonzero(state == 2)
-    pos = {k: i for i, k in enumerate(uniq)}
-    inv = np.array([pos[k] for k in keys], dtype=np.int64)
-    st = state[inv]
-    return {k: v[inv] for k, v in out.items()}, mask[inv], np.flatnonzero(st == 1), np.flatnonzero(st == 2)
-
-
-def decode_records(raws: list, fields: dict[str, FieldSpec], seq_len: int) -> tuple[dict[str, np.ndarray], np.ndarray]:
-    """Stored records -> ({field: [U, T, ...], "_mask": [U, T]}, state [U]: 0 ok, 1 missing, 2 corrupt)."""
-    out, state, _ = layout_for(schema_of(fields, seq_len)).decode_many(raws)
-    return out, state
+    return out, mask, np.flatnonzero(state == 1), np.flatnonzero(state == 2)
 
 
 def _parse_entry(raw: bytes, prefix: str, seq_len: int) -> tuple | None:
@@ -260,7 +290,7 @@ class RedisStorage:
 
     def read(self, slots: np.ndarray) -> tuple[dict[str, np.ndarray], np.ndarray, np.ndarray]:
         """-> (fields [B, T, ...], mask [B, T] bool, rows whose record is missing or corrupt)"""
-        data, mask, missing, corrupt = fetch_records(self.r, self.key_of(slots), self.fields, self.T)
+        data, mask, missing, corrupt = fetch_records(self.r, self.key_of(slots), self.fields, self.T, self.layout)
         return data, mask, np.union1d(missing, corrupt)
 
     def drop(self, slots: np.ndarray) -> None:
@@ -299,7 +329,8 @@ class RedisStorage:
         """Rebuild from redis -> (index arrays [capacity] incl. priority, count, drops by reason)."""
         C = self.capacity
         # records first, then the index and pending entries: a record written while we scan
-        # comes with its pending entry (one MULTI/EXEC), which we then read, so it is no orphan
+        # is either announced by the time `_sweep` reads the pending list, or its announcement
+        # finds it swept and is refused (the client writes it again)
         found = [x.decode() for x in self.r.scan_iter(match=f"{self.ns}:r:*", count=1000)]
         idx = {"stamp": np.full(C, -1, np.int64), "version": np.zeros(C, np.int64),
                "episode": np.zeros(C, np.int64), "steps": np.zeros(C, np.int64),
@@ -339,15 +370,38 @@ class RedisStorage:
                 idx["priority"][s] = v
         known = {k for k in self.keys if k is not None}
         named = {e[0] for e in entries.values()}  # corrupt ones were counted already
-        pending = {k for raw in self.r.lrange(f"{self.ns}:pending", 0, -1)
-                   for k in (_parse_entry(raw, f"{self.ns}:r:", self.T) or [[]])[0]}
-        orphans = [k for k in found if k not in named and k not in pending]
-        self.discard_keys(orphans + [k for k in found if k in named and k not in known])
+        self.discard_keys([k for k in found if k in named and k not in known])
+        orphans = self._sweep([k for k in found if k not in named])
         if bad_slots:
             self.r.hdel(f"{self.ns}:idx", *bad_slots)
         count = int(self.r.hget(f"{self.ns}:meta", "count") or 0)
         count = max(count, int(idx["stamp"].max()) + 1)
         return idx, count, {"corrupt": corrupt, "unacked": len(orphans)}
+
+    def _sweep(self, unindexed: list[str], tries: int = 100) -> list[str]:
+        """Delete the records that no pending entry names either (written by inserts that were
+        never announced: not acknowledged) -> those deleted. The pending list is WATCHed from
+        its read to the DEL, so an announcement in between makes us read it again; one that
+        comes after finds its records gone and is refused (`_ANNOUNCE`): a record is never
+        deleted under an announcement. Gives up (deletes nothing) if announcements keep coming."""
+        if not unindexed:
+            return []
+        key = f"{self.ns}:pending"
+        with self.r.pipeline(transaction=True) as p:
+            for _ in range(tries):
+                try:
+                    p.watch(key)
+                    named = {k for raw in p.lrange(key, 0, -1)
+                             for k in (_parse_entry(raw, f"{self.ns}:r:", self.T) or [[]])[0]}
+                    orphans = [k for k in unindexed if k not in named]
+                    p.multi()
+                    for i in range(0, len(orphans), 1000):
+                        p.delete(*orphans[i:i + 1000])
+                    p.execute()
+                    return orphans
+                except redis.WatchError:
+                    continue
+        return []
 
     def clear(self) -> None:
         """Delete this shard's namespace (tests and fresh runs)."""

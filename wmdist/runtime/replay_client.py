@@ -24,7 +24,6 @@ from __future__ import annotations
 import json
 import os
 import threading
-import time
 
 import numpy as np
 import ray
@@ -32,10 +31,13 @@ from ray.exceptions import RayActorError
 
 from wmdist.algos.base import FieldSpec
 from wmdist.replay.batch import Sample, SequenceBatch, make_keys, split_keys
+from wmdist.replay.coalesce import Coalescer
 from wmdist.replay.config import ReplayConfig
-from wmdist.replay.draws import DrawPool, is_weights
+from wmdist.replay.draws import DrawPools, is_weights
+from wmdist.replay.layout import layout_for, schema_of
 from wmdist.replay.shard import DROP_REASONS
 from wmdist.replay.storage_redis import (
+    RecordsMissing,
     commit_records,
     connect,
     encode_rows,
@@ -55,9 +57,10 @@ def route(source_id: int, episode_id: np.ndarray, shards: int) -> np.ndarray:
     return (h % np.uint64(shards)).astype(np.int64)
 
 
-# redis: draws asked ahead, in batches of B: one shard call per that many samples, sent that
-# many calls before it is needed (on a loaded machine a shard call can take 10+ ms)
-PREFETCH_BATCHES = 8
+# redis: each shard is asked for about this many samples' worth of draws at a time, that many
+# samples before they are needed (a shard call costs ~1 ms of this process's time and can take
+# 10+ ms to come back on a loaded machine)
+PREFETCH_SAMPLES = 16
 MAX_DRAW_AGE = 1.0  # seconds: older draws are dropped, so a slow reader sees fresh contents
 
 
@@ -74,18 +77,22 @@ class ReplayClient:
         self._closed = False
         self._rng: np.random.Generator | None = None
         self._warm = False  # this copy saw min_size reached with the ratio off
-        self._unsent_samples, self._sent_at = 0, 0.0  # sample counts not yet sent to the limiter (warm)
+        # counts that gate nothing, sent to the limiter at most every 50 ms on this copy's own
+        # thread (`coalesce.py`); flushed before every blocking limiter call, stats, save, close
+        self._inserts: Coalescer | None = None  # (sequences, steps) of inserts with ratio and lag off
+        self._samples: Coalescer | None = None  # sequences sampled once warm
+        self._capacity = shard_capacity(cfg, fields)  # sequence slots per shard
         # redis: draws taken ahead per shard (see `wmdist/replay/draws.py`); `_gen` counts this
         # copy's writes, and draws taken before one of them are dropped (read-your-writes)
-        self._pools: list[DrawPool] = [DrawPool() for _ in self.shards]
-        self._inflight: dict[int, tuple[int, object]] = {}  # shard -> (generation, draw ref)
+        self._draws: DrawPools | None = None  # built in the process that samples
         self._gen, self._pool_gen = 0, 0
+        self._layout = None  # the fields' RecordLayout (redis), built on first use
         self._draw_lock: threading.Lock | None = None
 
     def __getstate__(self) -> dict:
         state = dict(self.__dict__)
-        state.update(_server=None, _owner=False, _rng=None, _redis=None, _warm=False, _unsent_samples=0,
-                     _pools=[DrawPool() for _ in self.shards], _inflight={}, _draw_lock=None)
+        state.update(_server=None, _owner=False, _rng=None, _redis=None, _warm=False, _samples=None,
+                     _draws=None, _draw_lock=None, _layout=None, _inserts=None)
         return state
 
     @property
@@ -117,6 +124,8 @@ class ReplayClient:
         lag = self.cfg.max_policy_lag
         free = self.cfg.samples_per_insert == 0 and lag == 0  # never waits: counted afterwards, no round trip
         try:
+            if not free:
+                self._flush_counts()  # the limiter decides on every count this copy made
             ok, version = (True, -1) if free else ray.get(self.limiter.acquire_insert.remote(n, timeout))
         except RayActorError:
             return False  # the service was shut down
@@ -132,35 +141,43 @@ class ReplayClient:
             steps = sum(ray.get([self.shards[s].insert.remote(
                 batch if targets.size == 1 else batch.select(np.flatnonzero(dest == s)), min_version)
                 for s in targets]))
-        if free:
-            self.limiter.record_insert.remote(n, steps)
+        if free:  # gates nothing: summed and sent at most every 50 ms (a Ray call costs ~1 ms here)
+            if self._inserts is None:
+                self._inserts = Coalescer(lambda k, st: self.limiter.record_insert.remote(k, st), 2, wait=_settle)
+            self._inserts.add(n, steps)
         else:
             self.limiter.commit_insert.remote(steps)
         return True
 
     def _insert_direct(self, batch: SequenceBatch, dest: np.ndarray, min_version: int | None) -> int:
-        """Every shard's records and its pending entry go to redis in one MULTI/EXEC (one round
-        trip, fsynced under `appendfsync always` before it returns: the acknowledgement). The
-        shards index the entries later (on their next read or drain tick); a shard restart
-        in between indexes them on reload. Returns the real steps the shards will keep."""
+        """Every shard's records, then its pending entry, go to redis in one pipeline (one
+        round trip; see `commit_records`), with no shard call. The shards index the entries
+        later (on their next read or drain tick); a shard restart in between indexes them on
+        reload. Returns the real steps the shards will keep."""
         keep = np.ones(len(batch), bool) if min_version is None else batch.version >= min_version
         steps = batch.mask.sum(axis=1).astype(np.int64)
         if steps.min() < 1:  # the shards' pending entries require real steps in [1, T]
             raise ValueError("replay insert: a window has no real step (its mask is all 0)")
-        cap = shard_capacity(self.cfg, self.fields)
-        writes, stored = [], 0
+        cap = self._capacity
+        parts, stored = [], 0  # (shard, rows, policy-lag drops)
         for s in np.unique(dest):
             rows = np.flatnonzero((dest == s) & keep)
             lag = int(((dest == s) & ~keep).sum())
-            if rows.size == 0 and lag == 0:
-                continue
-            ns = self._namespaces[int(s)]
-            keys = new_keys(ns, rows.size)
-            entry = pending_entry(keys, batch.version[rows], batch.episode_id[rows], steps[rows], lag)
-            writes.append((ns, dict(zip(keys, encode_rows(batch, rows))), entry))
-            stored += int(steps[rows][-cap:].sum()) if rows.size else 0  # a shard keeps its newest `cap`
-        commit_records(self.redis, writes)
-        return stored
+            if rows.size or lag:
+                parts.append((int(s), rows, lag))
+                stored += int(steps[rows][-cap:].sum()) if rows.size else 0  # a shard keeps its newest `cap`
+        for _ in range(3):  # refused only if a shard restart swept the records mid-insert
+            writes = []
+            for s, rows, lag in parts:
+                keys = new_keys(self._namespaces[s], rows.size)
+                entry = pending_entry(keys, batch.version[rows], batch.episode_id[rows], steps[rows], lag)
+                writes.append((self._namespaces[s], dict(zip(keys, encode_rows(batch, rows, steps))), entry))
+            refused = commit_records(self.redis, writes)
+            if not refused:
+                return stored
+            parts = [parts[i] for i in refused]  # written again under new keys
+        # (the shards that accepted keep their part: like a crash between shards' inserts)
+        raise RecordsMissing("replay insert: records kept vanishing before their announcement (shard restarts)")
 
     # -- sample -------------------------------------------------------------------------
     def sample(self, batch_size: int, timeout: float | None = None, limited: bool = True) -> Sample | None:
@@ -176,6 +193,7 @@ class ReplayClient:
             if limited and self._warm:  # ratio off and min_size reached (it stays reached): just count
                 self._count_samples(batch_size)
             elif limited:
+                self._flush_counts()  # e.g. this copy's own inserts towards min_size
                 if not ray.get(self.limiter.acquire_sample.remote(batch_size, timeout)):
                     return None
                 self._warm = self.cfg.samples_per_insert == 0
@@ -190,16 +208,18 @@ class ReplayClient:
             return None  # the service was shut down
 
     def _count_samples(self, n: int) -> None:
-        """Warm and ratio off, the count gates nothing: send it at most every 50 ms."""
-        self._unsent_samples += n
-        if time.monotonic() - self._sent_at >= 0.05:
-            self._flush_samples()
+        """Warm and ratio off, the count gates nothing: sent at most every 50 ms."""
+        if self._samples is None:
+            self._samples = Coalescer(lambda k: self.limiter.acquire_sample.remote(k, 0), 1, wait=_settle)
+        self._samples.add(n)
 
-    def _flush_samples(self) -> None:
-        if self._unsent_samples:
-            self.limiter.acquire_sample.remote(self._unsent_samples, 0)
-            self._unsent_samples = 0
-        self._sent_at = time.monotonic()
+    def _flush_counts(self, settle: bool = False) -> None:
+        """Send every count held back (before a blocking limiter call); with `settle`, wait
+        until the limiter applied them (before stats, save, close: the threaded limiter may
+        run a later call of ours before an earlier one)."""
+        for c in (self._inserts, self._samples):
+            if c is not None:
+                c.flush(settle)
 
     def _sample(self, batch_size: int) -> Sample:
         """Memory backend: each shard gathers its rows and Ray carries them back."""
@@ -249,73 +269,26 @@ class ReplayClient:
                       keys=make_keys(shard_of, slots), stamps=stamps)
 
     def _take_draws(self, B: int):
-        """B draws split over shards by their latest size / mass reports -> (shard_of, slots,
-        stamps, mass, keys, union size, union mass), or None if every shard is empty.
-
-        Draws a shard call returns wait in per-shard pools. A call that finds enough there
-        makes no shard round trip; one that does not asks for exactly what it lacks. When
-        this copy made no write since its previous sample, every pool below
-        PREFETCH_BATCHES * B gets a request for that many in flight (read back by a later
-        call); after a write (e.g. a priority update each learner step) nothing is asked
-        ahead, since the write would void it. Draws older than MAX_DRAW_AGE are dropped."""
-        S, pools = len(self.shards), self._pools
+        """B draws from the per-shard pools (`draws.DrawPools`: a shard call on this path only
+        when a pool runs short, usually the request sent ahead). When this copy wrote since its
+        previous sample, the pools are voided (read your writes) and nothing is asked ahead,
+        since the next write (e.g. a priority update each learner step) would void it too."""
+        if self._draws is None:
+            self._draws = DrawPools(len(self.shards), lambda s, k: self.shards[s].draw.remote(k), ray.get,
+                                    PREFETCH_SAMPLES, MAX_DRAW_AGE)
         steady = self._pool_gen == self._gen
         if not steady:  # this copy wrote since these were drawn: they may not reflect it
-            for p in pools:
-                p.clear()
-            self._inflight.clear()
+            self._draws.clear()
             self._pool_gen = self._gen
-        now = time.monotonic()
-        for p in pools:
-            p.expire(now - MAX_DRAW_AGE)
-        self._refill([s for s in range(S) if not pools[s].reported], B)
-        if sum(p.total for p in pools) <= 0:  # maybe an old report: ask every shard afresh
-            for p in pools:
-                p.clear()
-            self._refill(range(S), B, fresh=True)
-            if sum(p.total for p in pools) <= 0:
-                return None
-        for _ in range(100):
-            totals = np.array([p.total for p in pools])
-            counts = np.array([B]) if S == 1 else self.rng.multinomial(B, totals / totals.sum())
-            short = [s for s in range(S) if len(pools[s]) < counts[s]]
-            if not short:
-                break
-            self._refill(short, B)
-            if sum(p.total for p in pools) <= 0:
-                return None
-        else:
-            raise RuntimeError("replay: shards kept returning too few draws")
-        n, total = sum(p.size for p in pools), float(totals.sum())
-        taken = [(s, pools[s].take(int(k))) for s, k in enumerate(counts) if k > 0]
-        ahead = PREFETCH_BATCHES * B
-        for s in range(S) if steady else ():  # read back by a later call, so it is there in time
-            if len(pools[s]) < ahead and s not in self._inflight:
-                self._inflight[s] = (self._gen, self.shards[s].draw.remote(ahead))
-        shard_of = np.concatenate([np.full(len(t[0]), s, np.int64) for s, t in taken])
-        slots, stamps, mass = (np.concatenate([t[i] for _, t in taken]) for i in range(3))
-        return shard_of, slots, stamps, mass, [k for _, t in taken for k in t[3]], n, total
-
-    def _refill(self, shards, k: int, fresh: bool = False) -> None:
-        """Add each shard's in-flight draws to its pool (waiting for them), or, with `fresh` or
-        none in flight, k new draws."""
-        refs = {}
-        for s in shards:
-            gen, ref = self._inflight.pop(s, (None, None))
-            if ref is not None and gen == self._gen and not fresh:
-                refs[s] = ref
-            else:
-                refs[s] = self.shards[s].draw.remote(k)
-        got = ray.get(list(refs.values()))
-        now = time.monotonic()
-        for s, d in zip(refs, got):
-            self._pools[s].add(d, now)
+        return self._draws.take(B, self.rng, prefetch=steady)
 
     def _fetch_direct(self, keys, shard_of, slots, stamps, w, n, total):
         """One MGET of the drawn records. Rows whose record is gone or undecodable are reported
         to their shard (which drops and counts them unless the slot was rewritten since the
         draw, i.e. evicted) and drawn again from the same shard."""
-        data, mask, missing, corrupt = fetch_records(self.redis, keys, self.fields, self.cfg.seq_len)
+        if self._layout is None:
+            self._layout = layout_for(schema_of(self.fields, self.cfg.seq_len))
+        data, mask, missing, corrupt = fetch_records(self.redis, keys, self.fields, self.cfg.seq_len, self._layout)
         redo = np.union1d(missing, corrupt)
         for _ in range(100):
             if redo.size == 0:
@@ -327,7 +300,8 @@ class ReplayClient:
                 g = ray.get(self.shards[s].draw.remote(rows.size))
                 if len(g["slots"]) < rows.size:
                     raise ValueError(f"replay shard {s} is empty")
-                d2, m2, miss2, corr2 = fetch_records(self.redis, g["keys"], self.fields, self.cfg.seq_len)
+                d2, m2, miss2, corr2 = fetch_records(self.redis, g["keys"], self.fields, self.cfg.seq_len,
+                                                    self._layout)
                 for f in self.fields:
                     data[f][rows] = d2[f]
                 mask[rows] = m2
@@ -375,7 +349,7 @@ class ReplayClient:
 
     # -- stats, checkpoints, shutdown ---------------------------------------------------
     def stats(self) -> dict[str, float]:
-        self._flush_samples()
+        self._flush_counts(settle=True)
         per = ray.get([s.stats.remote() for s in self.shards])
         out: dict[str, float] = {}
         for i, st in enumerate(per):
@@ -389,6 +363,7 @@ class ReplayClient:
 
     def save(self, directory: str) -> None:
         """Shards write `shard<i>.npz` (memory: all data; redis: index only), plus limiter state."""
+        self._flush_counts(settle=True)
         os.makedirs(directory, exist_ok=True)
         ray.get([s.save.remote(os.path.join(os.path.abspath(directory), f"shard{i}.npz"))
                  for i, s in enumerate(self.shards)])
@@ -415,7 +390,7 @@ class ReplayClient:
             return
         self._closed = True
         try:
-            self._flush_samples()
+            self._flush_counts(settle=True)
         except Exception:  # noqa: BLE001 - the limiter is gone already
             pass
         if self._redis is not None:
@@ -435,6 +410,11 @@ class ReplayClient:
         if self._server is not None:
             self._server.stop()
             self._server = None
+
+
+def _settle(refs: list) -> None:
+    """Wait for count calls sent earlier (bounded: a limiter that does not answer is gone)."""
+    ray.get(refs, timeout=60)
 
 
 def shard_capacity(cfg: ReplayConfig, fields: dict[str, FieldSpec]) -> int:
