@@ -149,10 +149,7 @@ class RecordLayout:
                     state[i] = 1
                     continue
                 try:  # not the template's bytes: the checked decoder
-                    arrs, m = decode_record(raws[i])
-                    for n, dt, shape in zip(self.names, self.dtypes, self.shapes):
-                        if n not in arrs or arrs[n].dtype != dt or arrs[n].shape != shape:
-                            raise CodecError(f"'{n}' missing or not {dt}{shape}")
+                    arrs, m = self.decode_one(raws[i])
                     for n in self.names:
                         out[n][i] = arrs[n]
                     metas[i] = m
@@ -169,6 +166,20 @@ class RecordLayout:
             for a in out.values():
                 a[bad] = 0
         return out, state, metas
+
+    def decode_one(self, raw: bytes) -> tuple[dict[str, np.ndarray], dict]:
+        """One stored record through the full checked decoder -> (arrays incl. `_mask`, meta);
+        CodecError unless every field is there with its dtype and shape and the meta's steps
+        agree with the mask."""
+        arrs, meta = decode_record(raw)
+        for n, dt, shape in zip(self.names, self.dtypes, self.shapes):
+            if n not in arrs:
+                raise CodecError(f"record lacks '{n}'")
+            if arrs[n].dtype != dt or arrs[n].shape != shape:
+                raise CodecError(f"'{n}' is {arrs[n].dtype}{arrs[n].shape}, expected {dt}{shape}")
+        if type(meta.get("steps")) not in _INT or int(arrs[MASK].sum()) != meta["steps"]:
+            raise CodecError("record metadata is inconsistent")
+        return arrs, meta
 
     def _cut_small(self, raws: list[bytes], rows: list[int], U: int) -> dict[str, np.ndarray]:
         """Small records (`raws`, of the template, for `rows`): joined into one buffer, then

@@ -152,17 +152,7 @@ def put_records(r: redis.Redis, records: dict[str, bytes]) -> None:
 
 def decode_checked(raw: bytes, fields: dict[str, FieldSpec], seq_len: int) -> tuple[dict[str, np.ndarray], dict]:
     """One stored record -> (arrays incl. `_mask`, meta); CodecError unless it fits the fields."""
-    arrs, meta = decode_record(raw)
-    for name in (*fields, "_mask"):
-        if name not in arrs:
-            raise CodecError(f"record lacks '{name}'")
-        spec = fields.get(name, FieldSpec((), "bool"))
-        a, want = arrs[name], (seq_len, *spec.shape)
-        if a.dtype != np.dtype(spec.dtype) or a.shape != want:
-            raise CodecError(f"'{name}' is {a.dtype}{a.shape}, expected {spec.dtype}{want}")
-    if not isinstance(meta.get("steps"), int) or int(arrs["_mask"].sum()) != meta["steps"]:
-        raise CodecError("record metadata is inconsistent")
-    return arrs, meta
+    return layout_for(schema_of(fields, seq_len)).decode_one(raw)
 
 
 def fetch_records(r: redis.Redis, keys: list[str], fields: dict[str, FieldSpec], seq_len: int,
@@ -311,7 +301,7 @@ class RedisStorage:
         recs = {}
         for row, (key, raw) in enumerate(zip(keys, self.r.mget(keys))):
             try:
-                arrs, meta = decode_checked(raw, self.fields, self.T) if raw is not None else (None, None)
+                arrs, meta = self.layout.decode_one(raw) if raw is not None else (None, None)
             except CodecError:
                 arrs = None
             if arrs is None:
