@@ -1,5 +1,6 @@
 """Imagination gradient routing, the policy's per-env state, and bf16 vs fp32 losses."""
 import numpy as np
+import pytest
 import torch
 
 from dreamer_loop import tiny_config
@@ -36,6 +37,28 @@ def test_backprop_actor_gradient_flows_through_dynamics_but_not_into_model_weigh
     assert all(p.requires_grad for p in learner.wm.parameters())  # ... and unfrozen afterwards
     grads = [p.grad for p in learner.ac.actor.parameters() if p.grad is not None]
     assert grads and sum(float(g.abs().sum()) for g in grads) > 0
+
+
+@pytest.mark.parametrize("version", [1, 2, 3])
+def test_backprop_actor_gets_the_horizon_values_gradient(version):
+    """With rewards and continuation constant, the actor's only signal is the value inside the
+    returns: each version's return critic (V2: the target copy) must pass gradient to the states."""
+    spec = bench_spec(False)
+    learner = Dreamer(spec, tiny_config(version, actor_entropy=0.0, cont_head=False, reward_head="mse")).make_learner()
+    with torch.no_grad():
+        reward_out = learner.wm.heads.tails["reward"][-1]
+        reward_out.weight.zero_()
+        reward_out.bias.zero_()
+        for net in (learner.ac.critic, learner.ac.slow_critic):  # twohot critics start at zero
+            torch.nn.init.normal_(net.tails["critic"][-1].weight, std=0.5)
+    t = learner._tensors(random_batch(spec, 3, 6))
+    _, _, start = learner.world_model_loss(t)
+    actor_loss, _, _ = learner.ac_loss(start, learner.generator)
+    actor_loss.backward()
+    grad = sum(float(p.grad.abs().sum()) for p in learner.ac.actor.parameters() if p.grad is not None)
+    assert grad > 1e-6
+    assert all(p.grad is None for p in learner.ac.critic.parameters())
+    assert all(p.grad is None for p in learner.ac.slow_critic.parameters())
 
 
 def test_policy_resets_state_only_where_first():

@@ -124,11 +124,15 @@ class ActorCriticLoss:
             feats_sg = {"h": h_all.detach(), "z": z_all.detach()}
             critic_logits = ac.critic(feats_sg)["critic"]  # [(H+1)*N, K]
             value = self._value(critic_logits).reshape(H + 1, n)
-            if cfg.slow_critic == "target":
-                with torch.no_grad():
-                    value_ret = self._value(ac.slow_critic(feats_sg)["critic"]).reshape(H + 1, n)
-            elif self.backprop:  # returns must carry the gradient back through the states
-                value_ret = self._value(ac.critic({"h": h_all, "z": z_all})["critic"]).reshape(H + 1, n)
+            # the values inside the returns: with backprop they must carry the gradient back
+            # through the imagined states, never into the critic's weights
+            feats = {"h": h_all, "z": z_all} if self.backprop else feats_sg
+            if cfg.slow_critic == "target":  # V2: a periodic copy computes the returns
+                with grad_ctx():
+                    value_ret = self._value(ac.slow_critic(feats)["critic"]).reshape(H + 1, n)
+            elif self.backprop:
+                with _freeze(ac.critic):  # no weight gradients for the critic from the actor's loss
+                    value_ret = self._value(ac.critic(feats)["critic"]).reshape(H + 1, n)
             else:
                 value_ret = value.detach()
             disc = cfg.discount * cont  # [H, N]
