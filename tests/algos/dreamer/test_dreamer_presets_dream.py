@@ -18,6 +18,9 @@ PRESETS = ["dreamerv1_dmc_cartpole_balance", "dreamerv2_dmc_cartpole_balance", "
            "dreamerv3_cartpole", "dreamerv3_dmc_pixels"]
 
 
+# deliberate, commented departures from a version's numbers (the reason is in the preset)
+DEVIATIONS = {"dreamerv1_dmc_cartpole_balance": ("free_nats",)}  # from state the KL sits below 3 nats
+
 @pytest.mark.parametrize("name", PRESETS)
 def test_preset_loads_and_keeps_version_numbers(name):
     cfg = load_config(CONFIGS / f"{name}.yaml")
@@ -25,6 +28,8 @@ def test_preset_loads_and_keeps_version_numbers(name):
     algo = cfg.algo.resolved()
     v = VERSION_DEFAULTS[algo.version]
     for key in ("kl_dyn", "kl_rep", "free_nats", "reward_head", "critic_head", "unimix", "slow_critic"):
+        if key in DEVIATIONS.get(name, ()):
+            continue
         assert getattr(algo, key) == v[key], key
     assert cfg.replay.overlap == 0  # so samples_per_insert is the train ratio
 
