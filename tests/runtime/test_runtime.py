@@ -93,12 +93,13 @@ def test_full_topology_versions_reach_collectors_and_actions_follow_weights(ray_
 
 
 class _RestartDriver(Driver):
-    """Runs past its time budget until a collector restart has been seen (for at most 300 s):
-    on a loaded machine start-up alone can outlast a short budget."""
+    """Runs past its time budget until a collector restart has been seen (for at most 240 s, so
+    a restart that never comes fails the assertion, not the 300 s test timeout): on a loaded
+    machine start-up alone can outlast a short budget."""
 
     def _budget_done(self) -> bool:
         restarted = self.c.restarts.get("collector", 0) >= 1
-        return (restarted and super()._budget_done()) or self.elapsed() > 300
+        return (restarted and super()._budget_done()) or self.elapsed() > 240
 
 
 def test_killed_collector_restarts_with_current_weights(ray_session, tmp_path):

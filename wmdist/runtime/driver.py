@@ -3,9 +3,10 @@ serves metrics, prints progress, writes logs, curves and checkpoints, and stops 
 
 Each actor works in short calls (a collector segment, a learner slice, a reanalyze job,
 an evaluation); the driver re-issues a call as soon as the previous one returns. A call
-that fails because its actor died is counted as a restart and re-issued (Ray restarts the
-actor, which pulls the current weights in its constructor); the learner dying ends the run
-with a message that names --resume.
+that fails because its actor died is re-issued (Ray restarts the actor, which pulls the
+current weights in its constructor) and a restart is counted when the actor answers again;
+an actor whose restarts are used up ends the run with a one-line error, and the learner
+dying ends the run with a message that names --resume.
 """
 from __future__ import annotations
 
@@ -79,6 +80,8 @@ class Driver:
         self.inflight: dict[Any, tuple[str, int]] = {}
         self.pids: dict[tuple[str, int], int] = {}
         self.retry_at: dict[tuple[str, int], float] = {}  # calls to re-issue once a dead actor may be back
+        self.deaths: collections.Counter = collections.Counter()  # (kind, i) -> calls lost to its death
+        self.coming_back: set[tuple[str, int]] = set()  # died; a restart is counted when it answers
         self.stop_reason: tuple[str, str] | None = None
         self.t_start = time.monotonic()
         self.elapsed0 = counters.elapsed_seconds
@@ -113,10 +116,15 @@ class Driver:
     def _handle(self, kind: str, i: int, res: dict) -> None:
         c = self.c
         pid = res.get("pid")
-        if pid is not None:  # a new process behind the same actor = Ray restarted it
-            if self.pids.get((kind, i), pid) != pid:
-                c.restarts[kind] = c.restarts.get(kind, 0) + 1
+        # Restarted = it answers after a call died, or a new process answers for it (killed while
+        # idle). The pid alone misses an actor killed before its first answer.
+        restarted = (kind, i) in self.coming_back
+        if pid is not None:
+            restarted |= self.pids.get((kind, i), pid) != pid
             self.pids[(kind, i)] = pid
+        if restarted:
+            c.restarts[kind] = c.restarts.get(kind, 0) + 1
+        self.coming_back.discard((kind, i))
         if kind == "collector":
             c.env_steps += int(res["env_steps"])
             c.episodes += len(res["episodes"])
@@ -148,6 +156,16 @@ class Driver:
                 # eval_min: the worst episode (board games: < 0 means the agent lost a game).
                 self._log({"kind": "eval", "eval_return": self.eval_return, "eval_length": self.eval_length,
                            "eval_min": float(np.min(res["returns"])), "eval_version": res["version"]})
+
+    def _restarts_used_up(self, kind: str, i: int) -> bool:
+        """Record a death of (kind, i); True once Ray will not bring it back (only collectors
+        have a finite `actors.max_restarts`; calls to a dead actor fail at once, so this stops a
+        busy loop of retries)."""
+        if (kind, i) not in self.coming_back:  # a retry failing before it is back is the same death
+            self.deaths[(kind, i)] += 1
+            self.coming_back.add((kind, i))
+        limit = self.cfg.actors.max_restarts if kind == "collector" else -1
+        return limit >= 0 and self.deaths[(kind, i)] > limit
 
     def _reissue(self, kind: str, i: int) -> None:
         if self.stop_reason is not None:
@@ -196,7 +214,12 @@ class Driver:
                         if _failed_to_start(err):  # a restart would fail the same way
                             self.stop_reason = ("error", f"{kind} {i} could not start: {_root_cause(err)}")
                             break
-                        if _died(err):  # Ray restarts it; ask again shortly (counted when it reports)
+                        if _died(err):  # Ray restarts it; ask again shortly (counted when it answers)
+                            if self._restarts_used_up(kind, i):
+                                self.stop_reason = ("error", f"{kind} {i} died and its restarts are used up "
+                                                    f"(actors.max_restarts={self.cfg.actors.max_restarts}): "
+                                                    f"{_one_line(err)}")
+                                break
                             self.retry_at[(kind, i)] = time.monotonic() + RETRY_SECONDS
                             continue
                         if kind == "collector":
