@@ -136,6 +136,30 @@ def test_killed_collector_restarts_with_current_weights(ray_session, tmp_path):
         topo.shutdown()
 
 
+def test_collector_with_no_restarts_left_ends_the_run_with_one_line(ray_session, tmp_path):
+    ray = ray_session
+    topo = _topology(tmp_path, "run.max_minutes=2", "actors.max_restarts=0")
+    counters = Counters()
+
+    def kill() -> None:
+        deadline = time.monotonic() + 120
+        while counters.env_steps == 0 and time.monotonic() < deadline:
+            time.sleep(0.1)
+        ray.kill(topo.collectors[0], no_restart=False)
+
+    timer = threading.Thread(target=kill, daemon=True)
+    timer.start()
+    try:
+        result = Driver(topo, counters).run()
+        timer.join()
+        assert result.status == "error", (result.status, result.message)
+        assert "collector 0 died and its restarts are used up" in result.message
+        assert "\n" not in result.message
+        assert counters.elapsed_seconds < 110  # it stopped, well before the 2-minute budget
+    finally:
+        topo.shutdown()
+
+
 def test_resume_restores_counters_weights_optimizer_and_replay(ray_session, tmp_path):
     ray = ray_session
     topo = _topology(tmp_path, "run.max_updates=40", "checkpoint.every_seconds=0")
