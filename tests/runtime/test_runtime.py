@@ -102,26 +102,44 @@ class _RestartDriver(Driver):
         return (restarted and super()._budget_done()) or self.elapsed() > 240
 
 
-def test_killed_collector_restarts_with_current_weights(ray_session, tmp_path):
+def _kill_later(ray, actor, ready, record: dict) -> threading.Thread:
+    """A thread that kills `actor` (Ray restarts it) once `ready()` holds (at most 120 s on)."""
+
+    def kill() -> None:
+        deadline = time.monotonic() + 120
+        while not ready() and time.monotonic() < deadline:
+            time.sleep(0.05)
+        ray.kill(actor, no_restart=False)
+        record["killed"] = True
+
+    thread = threading.Thread(target=kill, daemon=True)
+    thread.start()
+    return thread
+
+
+@pytest.mark.parametrize("when", ["stepping", "starting"])
+def test_killed_collector_restarts_with_current_weights(ray_session, tmp_path, when):
+    """Killed mid-run (its call fails), or during start-up (no call fails: its queued calls run in
+    the replacement), the collector comes back with current weights and the restart is counted."""
     ray = ray_session
     topo = _topology(tmp_path, "run.max_minutes=0.3")
     victim = topo.collectors[0]
-    killed_at: dict = {}
+    killed_at = {"version": ray.get(topo.broker.current_version.remote())}
     counters = Counters()
 
-    def kill() -> None:
-        # kill once collectors have stepped (a fixed delay could fall inside start-up)
-        deadline = time.monotonic() + 120
-        while counters.env_steps == 0 and time.monotonic() < deadline:
-            time.sleep(0.1)
+    def ready() -> bool:
+        if when == "starting":
+            return True
+        if counters.env_steps == 0:  # a fixed delay could fall inside start-up
+            return False
         killed_at["version"] = ray.get(topo.broker.current_version.remote())
-        ray.kill(victim, no_restart=False)
+        return True
 
-    timer = threading.Thread(target=kill, daemon=True)
-    timer.start()
+    timer = _kill_later(ray, victim, ready, killed_at)
     try:
         result = _RestartDriver(topo, counters).run()
         timer.join()
+        assert killed_at.get("killed")
         assert result.status == "done", result.message
         assert result.counters.restarts["collector"] >= 1
         assert result.counters.updates > 0
@@ -137,18 +155,9 @@ def test_killed_collector_restarts_with_current_weights(ray_session, tmp_path):
 
 
 def test_collector_with_no_restarts_left_ends_the_run_with_one_line(ray_session, tmp_path):
-    ray = ray_session
     topo = _topology(tmp_path, "run.max_minutes=2", "actors.max_restarts=0")
     counters = Counters()
-
-    def kill() -> None:
-        deadline = time.monotonic() + 120
-        while counters.env_steps == 0 and time.monotonic() < deadline:
-            time.sleep(0.1)
-        ray.kill(topo.collectors[0], no_restart=False)
-
-    timer = threading.Thread(target=kill, daemon=True)
-    timer.start()
+    timer = _kill_later(ray_session, topo.collectors[0], lambda: counters.env_steps > 0, {})
     try:
         result = Driver(topo, counters).run()
         timer.join()

@@ -7,7 +7,6 @@ before the first action after a restart).
 """
 from __future__ import annotations
 
-import os
 import time
 from typing import Any
 
@@ -15,7 +14,13 @@ import numpy as np
 
 from wmdist.config.schema import RunConfig
 from wmdist.envs.spec import EnvSpec
-from wmdist.runtime.roles import build_algorithm, device_for, set_threads
+from wmdist.runtime.roles import (
+    build_algorithm,
+    device_for,
+    process_tag,
+    set_threads,
+    was_restarted,
+)
 from wmdist.runtime.weights import pull
 
 
@@ -27,6 +32,7 @@ class Collector:
         set_threads(threads)
         self.cfg, self.index, self.replay, self.broker = cfg, index, replay, broker
         self.incarnation = _incarnation()
+        self.tag = process_tag()  # who answers (the driver counts restarts by it)
         E = cfg.actors.envs_per_actor
         # a restarted collector must not replay its predecessor's random stream
         seed = cfg.run.seed * 1_000_003 + index * 10_007 + self.incarnation * 7_919
@@ -88,7 +94,7 @@ class Collector:
         """Step every env `actors.segment_steps` times (unless the limiter holds us back)."""
         t0 = time.monotonic()
         stats: dict[str, Any] = {"index": self.index, "env_steps": 0, "episodes": [], "lengths": [],
-                                 "inserted": 0, "limiter_blocked": False, "pid": os.getpid()}
+                                 "inserted": 0, "limiter_blocked": False, **self.tag}
         if not self._flush(self.cfg.actors.insert_timeout):
             stats["limiter_blocked"] = True
             stats["busy_seconds"] = 0.0
@@ -155,14 +161,4 @@ class Collector:
 
 def _incarnation() -> int:
     """1 for an actor's first life; a fresh number after Ray restarted it (new random stream)."""
-    try:
-        import warnings
-
-        import ray
-
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            restarted = bool(ray.get_runtime_context().was_current_actor_reconstructed)
-    except Exception:  # noqa: BLE001 - not inside a Ray actor
-        return 1
-    return 2 + int(time.time() * 1000) % 1_000_000 if restarted else 1
+    return 2 + int(time.time() * 1000) % 1_000_000 if was_restarted() else 1

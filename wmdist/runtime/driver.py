@@ -4,7 +4,7 @@ serves metrics, prints progress, writes logs, curves and checkpoints, and stops 
 Each actor works in short calls (a collector segment, a learner slice, a reanalyze job,
 an evaluation); the driver re-issues a call as soon as the previous one returns. A call
 that fails because its actor died is re-issued (Ray restarts the actor, which pulls the
-current weights in its constructor) and a restart is counted when the actor answers again;
+current weights in its constructor) and a restart is counted when a new process answers;
 an actor whose restarts are used up ends the run with a one-line error, and the learner
 dying ends the run with a message that names --resume.
 """
@@ -80,8 +80,8 @@ class Driver:
         self.inflight: dict[Any, tuple[str, int]] = {}
         self.pids: dict[tuple[str, int], int] = {}
         self.retry_at: dict[tuple[str, int], float] = {}  # calls to re-issue once a dead actor may be back
-        self.deaths: collections.Counter = collections.Counter()  # (kind, i) -> calls lost to its death
-        self.coming_back: set[tuple[str, int]] = set()  # died; a restart is counted when it answers
+        self.deaths: collections.Counter = collections.Counter()  # (kind, i) -> times its process died
+        self.coming_back: set[tuple[str, int]] = set()  # a call died; not heard from since
         self.stop_reason: tuple[str, str] | None = None
         self.t_start = time.monotonic()
         self.elapsed0 = counters.elapsed_seconds
@@ -115,16 +115,7 @@ class Driver:
 
     def _handle(self, kind: str, i: int, res: dict) -> None:
         c = self.c
-        pid = res.get("pid")
-        # Restarted = it answers after a call died, or a new process answers for it (killed while
-        # idle). The pid alone misses an actor killed before its first answer.
-        restarted = (kind, i) in self.coming_back
-        if pid is not None:
-            restarted |= self.pids.get((kind, i), pid) != pid
-            self.pids[(kind, i)] = pid
-        if restarted:
-            c.restarts[kind] = c.restarts.get(kind, 0) + 1
-        self.coming_back.discard((kind, i))
+        self._note_process(kind, i, res)
         if kind == "collector":
             c.env_steps += int(res["env_steps"])
             c.episodes += len(res["episodes"])
@@ -156,6 +147,19 @@ class Driver:
                 # eval_min: the worst episode (board games: < 0 means the agent lost a game).
                 self._log({"kind": "eval", "eval_return": self.eval_return, "eval_length": self.eval_length,
                            "eval_min": float(np.min(res["returns"])), "eval_version": res["version"]})
+
+    def _note_process(self, kind: str, i: int, res: dict) -> None:
+        """Count a restart when a new process answers for (kind, i): a pid other than the last
+        one seen, or a first answer from a process Ray started as a replacement (an actor killed
+        during start-up fails no call: its queued calls run in the replacement)."""
+        key, pid = (kind, i), res.get("pid")
+        if pid is not None and self.pids.get(key) != pid:
+            if key in self.pids or res.get("restarted"):
+                self.c.restarts[kind] = self.c.restarts.get(kind, 0) + 1
+                if key not in self.coming_back:  # a death no failed call told us of
+                    self.deaths[key] += 1
+            self.pids[key] = pid
+        self.coming_back.discard(key)
 
     def _restarts_used_up(self, kind: str, i: int) -> bool:
         """Record a death of (kind, i); True once Ray will not bring it back (only collectors

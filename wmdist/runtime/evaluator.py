@@ -1,7 +1,6 @@
 """Greedy evaluation: the evaluator role during training and `wmdist eval` afterwards."""
 from __future__ import annotations
 
-import os
 import time
 from typing import Any
 
@@ -10,7 +9,7 @@ import numpy as np
 from wmdist.algos.base import Policy
 from wmdist.config.schema import RunConfig
 from wmdist.envs.spec import EnvSpec
-from wmdist.runtime.roles import build_algorithm, set_threads
+from wmdist.runtime.roles import build_algorithm, process_tag, set_threads
 from wmdist.runtime.weights import pull
 
 
@@ -50,6 +49,7 @@ class EvaluatorRole:
         from wmdist.envs.vector import make_vector_env
 
         set_threads(threads)
+        self.tag = process_tag()  # who answers (the driver counts restarts by it)
         self.cfg, self.broker = cfg, broker
         seed = cfg.run.seed + 99_991
         self.policy = build_algorithm(cfg, spec, seed).make_policy("cpu")
@@ -82,7 +82,7 @@ class EvaluatorRole:
         else:
             returns, lengths = play_episodes(self.policy, self.venv, self.cfg.eval.episodes)
         return {"version": self.version, "returns": returns, "lengths": lengths,
-                "busy_seconds": time.monotonic() - t0, "pid": os.getpid()}
+                "busy_seconds": time.monotonic() - t0, **self.tag}
 
     def ping(self) -> bool:
         return True

@@ -2,19 +2,19 @@
 latest weights, write fresh targets back (dropped by replay if the item changed since)."""
 from __future__ import annotations
 
-import os
 import time
 from typing import Any
 
 from wmdist.config.schema import RunConfig
 from wmdist.envs.spec import EnvSpec
-from wmdist.runtime.roles import build_algorithm, device_for, set_threads
+from wmdist.runtime.roles import build_algorithm, device_for, process_tag, set_threads
 from wmdist.runtime.weights import pull
 
 
 class ReanalyzerRole:
     def __init__(self, cfg: RunConfig, spec: EnvSpec, index: int, replay: Any, broker: Any, threads: int = 1) -> None:
         set_threads(threads)
+        self.tag = process_tag()  # who answers (the driver counts restarts by it)
         self.cfg, self.replay, self.broker = cfg, replay, broker
         algo = build_algorithm(cfg, spec, cfg.run.seed + 7_777 + index)
         self.reanalyzer = algo.make_reanalyzer(device_for(cfg.reanalyze.gpus))
@@ -33,14 +33,14 @@ class ReanalyzerRole:
         sample = self.replay.sample(self.cfg.reanalyze.batch_size, timeout=1.0, limited=False)
         if sample is None:
             return {"reanalyzed": 0, "busy_seconds": time.monotonic() - t0, "version": self.version,
-                "pid": os.getpid()}
+                **self.tag}
         batch = dict(sample.data, mask=sample.mask, is_weight=sample.is_weight)
         fields = self.reanalyzer.reanalyze(batch)
         self.replay.write_back(sample.keys, sample.stamps, fields)
         n = len(sample.mask)
         self.done += n
         return {"reanalyzed": n, "busy_seconds": time.monotonic() - t0, "version": self.version,
-                "pid": os.getpid()}
+                **self.tag}
 
     def ping(self) -> bool:
         return True

@@ -1,6 +1,8 @@
 """Small helpers every role's process uses to set itself up."""
 from __future__ import annotations
 
+import os
+
 from wmdist.algos.base import Algorithm
 from wmdist.config.schema import RunConfig
 from wmdist.envs.spec import EnvSpec
@@ -29,3 +31,24 @@ def device_for(gpus: float) -> str:
     import torch
 
     return "cuda" if gpus > 0 and torch.cuda.is_available() else "cpu"
+
+
+def was_restarted() -> bool:
+    """True in a process Ray started to replace a dead one (False outside a Ray actor)."""
+    try:
+        import warnings
+
+        import ray
+
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            return bool(ray.get_runtime_context().was_current_actor_reconstructed)
+    except Exception:  # noqa: BLE001 - not inside a Ray actor
+        return False
+
+
+def process_tag() -> dict:
+    """Who answered: the driver counts a restart when a new process answers for an actor, or
+    when the first process it hears from is already a replacement (killed during start-up,
+    its queued calls go to the replacement and no call fails)."""
+    return {"pid": os.getpid(), "restarted": was_restarted()}
