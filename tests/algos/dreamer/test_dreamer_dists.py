@@ -1,4 +1,6 @@
 """symlog/symexp, two-hot golden values, unimix and straight-through gradients."""
+import math
+
 import pytest
 import torch
 
@@ -107,3 +109,21 @@ def test_twohot_gather_loss_and_mean_match_the_dense_reference():
     torch.testing.assert_close(twohot_nll(logp, y, bins), dense.detach())
     mean_ref = symexp((torch.softmax(logits.detach(), -1) * bins).sum(-1))
     torch.testing.assert_close(twohot_mean(logits.detach(), bins), mean_ref, rtol=1e-5, atol=1e-5)
+
+
+@pytest.mark.parametrize("init_std", [5.0, 1.0, 0.3])
+def test_tanh_normal_actor_starts_at_its_init_std_and_its_log_prob_matches_sampling(init_std):
+    from wmdist.algos.dreamer.actor import ActionDist
+
+    out = torch.zeros(4000, 2)  # [N, 2A], A = 1: what a fresh head outputs
+    d = ActionDist(out, False, "tanh_normal", 0.0, 0.1, 1.0, init_std)
+    torch.testing.assert_close(d.std, torch.full((4000, 1), init_std + 0.1))
+    a = d.sample(torch.Generator().manual_seed(0))  # [N, 1] in (-1, 1)
+    # the empirical spread of atanh(a) is the pre-tanh std
+    assert abs(float(torch.atanh(a.clamp(-0.999999, 0.999999)).std()) - (init_std + 0.1)) < 0.15 * (init_std + 0.1)
+    # the density of tanh(x), x ~ N(0, s), over [-0.999, 0.999] holds P(|x| < atanh 0.999)
+    grid = torch.linspace(-0.999, 0.999, 20001).unsqueeze(-1)  # [G, 1]
+    g = ActionDist(torch.zeros(len(grid), 2), False, "tanh_normal", 0.0, 0.1, 1.0, init_std)
+    mass = float(torch.trapezoid(g.log_prob(grid).exp(), grid.squeeze(-1)))
+    expected = math.erf(math.atanh(0.999) / ((init_std + 0.1) * math.sqrt(2)))
+    assert abs(mass - expected) < 0.01

@@ -13,13 +13,18 @@ import torch.nn.functional as F
 
 from wmdist.nets.dists import sample_onehot_index, unimix_logits
 
-_V1_RAW_INIT_STD = math.log(math.expm1(5.0))  # softplus(raw + this) = 5 at raw = 0 (V1 init_std 5)
+
+
+def _softplus_inverse(y: float) -> float:
+    """The raw offset that makes softplus(raw + offset) = y at raw = 0."""
+    return math.log(math.expm1(y))
 
 
 class ActionDist:
     """A batch of action distributions built from the actor head's output [N, A or 2A]."""
 
-    def __init__(self, out: torch.Tensor, discrete: bool, kind: str, unimix: float, min_std: float, max_std: float) -> None:
+    def __init__(self, out: torch.Tensor, discrete: bool, kind: str, unimix: float, min_std: float, max_std: float,
+                 init_std: float = 5.0) -> None:
         self.discrete, self.kind = discrete, kind
         out = out.float()
         if discrete:
@@ -28,7 +33,7 @@ class ActionDist:
         m, s = out.chunk(2, -1)
         if kind == "tanh_normal":
             self.mean = 5.0 * torch.tanh(m / 5.0)
-            self.std = F.softplus(s + _V1_RAW_INIT_STD) + min_std
+            self.std = F.softplus(s + _softplus_inverse(init_std)) + min_std  # init_std at s = 0
         else:
             self.mean = torch.tanh(m)
             self.std = (max_std - min_std) * torch.sigmoid(s + 2.0) + min_std

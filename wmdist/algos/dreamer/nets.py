@@ -91,7 +91,8 @@ class ActorCritic(nn.Module):
     def policy(self, h: torch.Tensor, z: Latent) -> ActionDist:
         c = self.cfg
         out = self.actor({"h": h, "z": z})["actor"]
-        return ActionDist(out, self.spec.discrete, c.actor_dist_cont, c.unimix, c.actor_min_std, c.actor_max_std)
+        return ActionDist(out, self.spec.discrete, c.actor_dist_cont, c.unimix, c.actor_min_std, c.actor_max_std,
+                          c.actor_init_std)
 
     @torch.no_grad()
     def update_slow(self, mix: float) -> None:
