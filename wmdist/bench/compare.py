@@ -43,6 +43,7 @@ def main(argv: list[str] | None = None) -> int:
     fig, ax = plt.subplots(figsize=(7, 4))
     colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
     styles = ("-", "--", ":", "-.")  # seeds of one group: one colour, told apart by line style
+    markers = (".", "x", "+", "^")  # and, past four seeds, by marker
     for gi, spec in enumerate(a.groups):
         if "=" not in spec:
             print(f"wmdist: expected GROUP=DIR, got {spec!r}", file=sys.stderr)
@@ -55,7 +56,7 @@ def main(argv: list[str] | None = None) -> int:
             steps.append(res["env_steps_to_target"])
             ev = [r for r in read_jsonl(jsonl) if r.get("kind") == "eval" and r.get("eval_return") is not None]
             ax.plot([r["env_steps"] for r in ev], [r["eval_return"] for r in ev], color=colours[gi % len(colours)],
-                    linestyle=styles[si % len(styles)], marker=".", alpha=0.8, label=f"{name} seed {seed}")
+                    linestyle=styles[si % len(styles)], marker=markers[si // len(styles) % len(markers)], alpha=0.8, label=f"{name} seed {seed}")
         reached = [s for s in steps if s is not None]
         print(json.dumps({"group": name, "runs": len(steps), "reached": len(reached),
                           "mean_env_steps_to_target": sum(reached) / len(reached) if reached else None}), flush=True)
