@@ -14,13 +14,7 @@ import numpy as np
 
 from wmdist.config.schema import RunConfig
 from wmdist.envs.spec import EnvSpec
-from wmdist.runtime.roles import (
-    build_algorithm,
-    device_for,
-    process_tag,
-    set_threads,
-    was_restarted,
-)
+from wmdist.runtime.roles import build_algorithm, device_for, process_tag, set_threads
 from wmdist.runtime.weights import pull
 
 
@@ -31,8 +25,8 @@ class Collector:
 
         set_threads(threads)
         self.cfg, self.index, self.replay, self.broker = cfg, index, replay, broker
-        self.incarnation = _incarnation()
         self.tag = process_tag()  # who answers (the driver counts restarts by it)
+        self.incarnation = _incarnation(self.tag["restarted"])
         E = cfg.actors.envs_per_actor
         # a restarted collector must not replay its predecessor's random stream
         seed = cfg.run.seed * 1_000_003 + index * 10_007 + self.incarnation * 7_919
@@ -159,6 +153,6 @@ class Collector:
         return True
 
 
-def _incarnation() -> int:
+def _incarnation(restarted: bool) -> int:
     """1 for an actor's first life; a fresh number after Ray restarted it (new random stream)."""
-    return 2 + int(time.time() * 1000) % 1_000_000 if was_restarted() else 1
+    return 2 + int(time.time() * 1000) % 1_000_000 if restarted else 1

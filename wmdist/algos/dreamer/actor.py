@@ -14,7 +14,6 @@ import torch.nn.functional as F
 from wmdist.nets.dists import sample_onehot_index, unimix_logits
 
 
-
 def _softplus_inverse(y: float) -> float:
     """The raw offset that makes softplus(raw + offset) = y at raw = 0."""
     return math.log(math.expm1(y))
