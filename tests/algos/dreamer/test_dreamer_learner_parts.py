@@ -92,6 +92,25 @@ def test_continuous_policy_actions_in_bounds():
             assert a.shape == (2, 1) and a.dtype == np.float32 and np.all(np.abs(a) <= 1)
 
 
+def test_v1_explores_with_the_actors_sample_plus_noise():
+    """V1 (authors' code): exploring action = clip(actor sample + N(0, 0.3)), not the mode + noise."""
+    spec = bench_spec(False)
+    algo = Dreamer(spec, tiny_config(1, actor_init_std=1.0, expl_noise=0.3))
+    pol = algo.make_policy()
+    with torch.no_grad():  # actor output 0: mean tanh-Gaussian at 0 with std 1, mode 0
+        last = pol.ac.actor.tails["actor"][-1]
+        last.weight.zero_()
+        last.bias.zero_()
+    obs = np.zeros((4000, 5), np.float32)
+    explored, _ = pol.act(obs, np.ones(4000, bool), None, None, explore=True)
+    greedy, _ = pol.act(obs, np.ones(4000, bool), None, None, explore=False)
+    np.testing.assert_allclose(greedy, 0.0, atol=1e-6)
+    rng = np.random.default_rng(0)  # reference: the same distribution drawn with numpy
+    ref = np.clip(np.tanh(rng.normal(0.0, 1.0 + 0.1, 200_000)) + rng.normal(0.0, 0.3, 200_000), -1, 1)
+    assert abs(explored.std() - ref.std()) < 0.03  # mode + noise alone would give ~0.3
+    assert abs(explored.mean()) < 0.05
+
+
 def _losses(bf16, seed):
     spec = bench_spec(True)
     learner = Dreamer(spec, tiny_config(3, bf16=bf16, horizon=5), seed=0).make_learner()

@@ -16,7 +16,8 @@ from wmdist.envs.spec import EnvSpec
 class DreamerPolicy(Policy):
     """Carries (h, z, previous action) for each of E envs; resets rows where `first`.
 
-    Exploration: V1 adds N(0, expl_noise) to the actor's mode; V2/V3 sample the actor.
+    Exploration samples the actor; V1 also adds N(0, expl_noise) to that sample (the authors'
+    code: `actor(feat).sample()`, then additive Gaussian noise 0.3, clipped to [-1, 1]).
     Greedy (explore=False) takes the actor's mode.
     """
 
@@ -62,13 +63,11 @@ class DreamerPolicy(Policy):
             action = dist.sample(self.generator) if explore else dist.mode()
             a_model = F.one_hot(action, self.spec.num_actions).float()
         else:
-            if explore and self.cfg.expl_noise > 0:  # V1: Gaussian noise around the mode
-                noise = torch.randn(dist.mean.shape, generator=self.generator, device=self.device)
-                action = (dist.mode() + self.cfg.expl_noise * noise).clamp(-1, 1)
-            elif explore:
-                action = dist.sample(self.generator).clamp(-1, 1)
-            else:
-                action = dist.mode().clamp(-1, 1)
+            action = dist.sample(self.generator) if explore else dist.mode()
+            if explore and self.cfg.expl_noise > 0:  # V1: Gaussian noise around the actor's sample
+                noise = torch.randn(action.shape, generator=self.generator, device=self.device)
+                action = action + self.cfg.expl_noise * noise
+            action = action.clamp(-1, 1)
             a_model = action
         self.h, self.z, self.prev_action = h, z, a_model
         return action_to_env(action, self.spec), {}
