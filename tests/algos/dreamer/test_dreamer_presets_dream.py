@@ -19,7 +19,8 @@ PRESETS = ["dreamerv1_dmc_cartpole_balance", "dreamerv2_dmc_cartpole_balance", "
 
 
 # deliberate, commented departures from a version's numbers (the reason is in the preset)
-DEVIATIONS = {"dreamerv1_dmc_cartpole_balance": ("free_nats",)}  # from state the KL sits below 3 nats
+DEVIATIONS = {"dreamerv1_dmc_cartpole_balance": ("free_nats", "slow_critic")}  # from state the KL sits below 3 nats;
+#   a V2-style target critic steadies V1's returns
 
 @pytest.mark.parametrize("name", PRESETS)
 def test_preset_loads_and_keeps_version_numbers(name):
