@@ -97,7 +97,7 @@ def test_v1_explores_with_the_actors_sample_plus_noise():
     spec = bench_spec(False)
     algo = Dreamer(spec, tiny_config(1, actor_init_std=1.0, expl_noise=0.3))
     pol = algo.make_policy()
-    with torch.no_grad():  # actor output 0: mean tanh-Gaussian at 0 with std 1, mode 0
+    with torch.no_grad():  # actor output 0: pre-tanh mean 0, std 1 + min_std 0.1; mode 0
         last = pol.ac.actor.tails["actor"][-1]
         last.weight.zero_()
         last.bias.zero_()

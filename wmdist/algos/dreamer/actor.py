@@ -32,7 +32,7 @@ class ActionDist:
         m, s = out.chunk(2, -1)
         if kind == "tanh_normal":
             self.mean = 5.0 * torch.tanh(m / 5.0)
-            self.std = F.softplus(s + _softplus_inverse(init_std)) + min_std  # init_std at s = 0
+            self.std = F.softplus(s + _softplus_inverse(init_std)) + min_std  # init_std + min_std at s = 0
         else:
             self.mean = torch.tanh(m)
             self.std = (max_std - min_std) * torch.sigmoid(s + 2.0) + min_std
