@@ -9,8 +9,15 @@ from wmdist.envs.spec import EnvSpec
 
 
 def set_threads(n: int) -> None:
-    """torch threads = this role's CPU share, so processes don't thrash a small machine."""
+    """torch threads = this role's CPU share, so processes don't thrash a small machine.
+
+    Also keeps freed memory mapped (`malloc.tune_malloc`): every role reallocates the same
+    tensors each step."""
     import torch
+
+    from wmdist.runtime.malloc import tune_malloc
+
+    tune_malloc()
 
     torch.set_num_threads(max(1, int(n)))
     try:

@@ -92,6 +92,36 @@ def test_embedding_bag_linear_matches_dense_values_and_gradients(n):
     assert probs.grad.abs().sum() > 0
 
 
+@pytest.mark.parametrize("grad", [True, False])  # the custom autograd path and the plain embedding bag
+def test_embedding_bag_linear_under_bf16_autocast_matches_dense_and_stays_bf16(grad):
+    """Under autocast the one-hot rows are summed in bf16 like the dense matmul there (a
+    mixed bf16 + fp32 sum would promote to fp32 on a slow path); weight gradients are
+    accumulated in fp32 and match the dense layer's."""
+    torch.manual_seed(0)
+    n, s, c, d = 300, 8, 16, 24
+    lin = SplitLinear({"h": 6, "z": s * c}, d)
+    lat = Latent(index=torch.randint(0, c, (n, s)), classes=c)
+    h = torch.randn(n, 6)
+    g = torch.randn(n, d)
+
+    def run(z):
+        lin.zero_grad()
+        with torch.autocast("cpu", dtype=torch.bfloat16), torch.set_grad_enabled(grad):
+            out = lin({"h": h, "z": z})
+        if grad:
+            (out.float() * g).sum().backward()
+        return out, [None if p.grad is None else p.grad.clone() for p in lin.parameters()]
+
+    out_fast, grads_fast = run(lat)
+    out_dense, grads_dense = run(lat.dense())
+    assert out_fast.dtype == out_dense.dtype == torch.bfloat16
+    torch.testing.assert_close(out_fast.float(), out_dense.float(), atol=0.05, rtol=0.02)
+    if grad:
+        for a, b in zip(grads_fast, grads_dense):
+            assert a.dtype == torch.float32
+            torch.testing.assert_close(a, b, atol=0.05, rtol=0.02)
+
+
 def test_twohot_gather_loss_and_mean_match_the_dense_reference():
     """The optimised two-hot loss (two gathered bins) and mean (a mat-vec) against the plain
     dense formulas, values and gradients, including targets outside the support."""

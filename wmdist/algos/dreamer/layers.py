@@ -51,42 +51,51 @@ class Latent:
         return Latent(r(self.index, 1), r(self.probs, 2), r(self.sample, 1), self.classes)
 
 
+def compute_dtype(x: torch.Tensor) -> torch.dtype:
+    """The dtype a matmul on `x`'s device produces here: autocast's if it is on, else x's."""
+    if torch.is_autocast_enabled(x.device.type):
+        return torch.get_autocast_dtype(x.device.type)
+    return x.dtype
+
+
 class _StraightThroughRows(torch.autograd.Function):
     """Value 0; gradient w.r.t. probs [N, Z] is grad_out @ W^T (the straight-through path)."""
 
     @staticmethod
-    def forward(ctx, probs: torch.Tensor, weight: torch.Tensor) -> torch.Tensor:  # type: ignore[override]
+    def forward(ctx, probs: torch.Tensor, weight: torch.Tensor, dtype: torch.dtype) -> torch.Tensor:  # type: ignore[override]
         ctx.save_for_backward(weight)
-        return probs.new_zeros(probs.shape[0], weight.shape[1])
+        return probs.new_zeros(probs.shape[0], weight.shape[1], dtype=dtype)
 
     @staticmethod
     def backward(ctx, grad: torch.Tensor):  # type: ignore[override]
         (weight,) = ctx.saved_tensors
-        return grad.to(weight.dtype) @ weight.t(), None
+        return grad.to(weight.dtype) @ weight.t(), None, None
 
 
 class _OneHotMatmul(torch.autograd.Function):
     """sum_s W[s * C + index[n, s]] for every row n: [N, S] indices, W [S*C, D] -> [N, D].
 
-    Forward is an embedding bag. The weight gradient scatters grad rows into the selected
-    rows, one index_add per latent variable (N*D adds each), avoiding the sort that
+    Forward is an embedding bag, summed in `dtype` (bf16 under autocast, like a matmul
+    there). The weight gradient scatters grad rows into the selected rows in the weight's
+    own dtype, one index_add per latent variable (N*D adds each), avoiding the sort that
     embedding_bag's backward does.
     """
 
     @staticmethod
-    def forward(ctx, index: torch.Tensor, weight: torch.Tensor, classes: int) -> torch.Tensor:  # type: ignore[override]
+    def forward(ctx, index: torch.Tensor, weight: torch.Tensor, classes: int, dtype: torch.dtype) -> torch.Tensor:  # type: ignore[override]
         flat = index + torch.arange(index.shape[1], device=index.device) * classes  # [N, S]
         ctx.save_for_backward(flat)
-        ctx.weight_shape = weight.shape
-        return F.embedding_bag(flat, weight, mode="sum")
+        ctx.weight_shape, ctx.weight_dtype = weight.shape, weight.dtype
+        return F.embedding_bag(flat, weight.to(dtype), mode="sum")
 
     @staticmethod
     def backward(ctx, grad: torch.Tensor):  # type: ignore[override]
         (flat,) = ctx.saved_tensors
+        grad = grad.to(ctx.weight_dtype)  # accumulate in fp32: a row can collect thousands of terms
         grad_w = grad.new_zeros(ctx.weight_shape)
         for s in range(flat.shape[1]):
             grad_w.index_add_(0, flat[:, s], grad)
-        return None, grad_w, None
+        return None, grad_w, None, None
 
 
 _DENSE_ROWS = 64  # measured crossover: dense wins at 16 rows, the index_add path at 1024
@@ -102,13 +111,14 @@ def onehot_matmul(lat: Latent, weight: torch.Tensor, cols: int | None = None) ->
         w = w.contiguous()
     if lat.index.shape[0] <= _DENSE_ROWS:  # a few rows (the observe loop): a dense matmul has less overhead
         return lat.dense() @ w
+    dtype = compute_dtype(w)  # the embedding bag is not autocast: match the matmuls' dtype by hand
     if w.requires_grad and torch.is_grad_enabled():
-        out = _OneHotMatmul.apply(lat.index, w, lat.classes)
+        out = _OneHotMatmul.apply(lat.index, w, lat.classes, dtype)
     else:
         offsets = torch.arange(lat.index.shape[1], device=lat.index.device) * lat.classes
-        out = F.embedding_bag(lat.index + offsets, w, mode="sum")
+        out = F.embedding_bag(lat.index + offsets, w.to(dtype), mode="sum")
     if lat.probs is not None and lat.probs.requires_grad:
-        out = out + _StraightThroughRows.apply(lat.probs.reshape(lat.index.shape[0], -1), w)
+        out = out + _StraightThroughRows.apply(lat.probs.reshape(lat.index.shape[0], -1), w, dtype)
     return out
 
 
@@ -147,11 +157,12 @@ class SplitLinear(nn.Module):
         for name, x in parts.items():
             p = self.part(name, x, cols)
             if scale is not None and name in scale:
-                p = p * scale[name]  # e.g. zero the previous latent where an episode starts
-            y = p if y is None else y + p
+                p = p * scale[name].to(p.dtype)  # e.g. zero the previous latent where an episode starts
+            # one dtype throughout: a mixed bf16 + fp32 add takes a slow path and makes fp32
+            y = p if y is None else y + p.to(y.dtype)
         if self.bias is not None:
             b = self.bias if cols is None else self.bias[:cols]
-            y = y + b
+            y = y + b.to(y.dtype)
         assert y is not None
         return y
 
