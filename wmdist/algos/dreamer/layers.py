@@ -188,7 +188,7 @@ class GRUCell(nn.Module):
         reset, cand, update = gates.chunk(3, -1)
         cand = torch.tanh(torch.sigmoid(reset) * cand)
         update = torch.sigmoid(update - 1)
-        return update * cand + (1 - update) * h.to(cand.dtype)
+        return torch.lerp(h.to(cand.dtype), cand, update)  # u * c + (1 - u) * h in one op
 
 
 class Heads(nn.Module):
