@@ -13,7 +13,7 @@ from wmdist.bench.dreamer import bench_spec, random_batch
 
 
 def _plain_observe(rssm, embed, action, first, generator):
-    """The obviously-correct loop: every step masked, the action fed raw each step."""
+    """The obviously-correct loop: every step masked, each step's action share computed there."""
     b, t_len = first.shape
     keep = (~first).float().unsqueeze(-1)
     keep[:, 0] = 0.0
@@ -21,7 +21,7 @@ def _plain_observe(rssm, embed, action, first, generator):
     a_prev = torch.zeros_like(action[:, 0])
     hs, posts = [], []
     for t in range(t_len):
-        h = rssm.img_step(h, z, a_prev, keep[:, t])
+        h = rssm.img_step(h, z, rssm.action_part(a_prev), keep[:, t])
         post = rssm.post(h, rssm.embed_part(embed[:, t]))
         z = rssm.sample(post, generator)
         a_prev = action[:, t]

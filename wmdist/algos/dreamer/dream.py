@@ -56,7 +56,7 @@ def predict_open_loop(algo, weights: Weights, obs: np.ndarray, actions: np.ndarr
     preds = []
     for t in range(len(obs)):
         keep = torch.full((1, 1), 0.0 if t == 0 else 1.0)
-        h = rssm.img_step(h, z, a_prev, keep)
+        h = rssm.img_step(h, z, rssm.action_part(a_prev), keep)
         if t < context:  # sampled latents, as the model itself imagines (the mode can sit on one class)
             z = rssm.sample(rssm.post(h, rssm.embed_part(wm.encode(obs_t[t:t + 1]))), gen, grad=False)
         else:

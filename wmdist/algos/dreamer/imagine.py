@@ -70,7 +70,7 @@ def imagine(
         else:
             a_in = a if backprop else a.detach()
         with dyn_ctx():
-            h = rssm.img_step(h, z, a_in)
+            h = rssm.img_step(h, z, rssm.action_part(a_in))
             z = rssm.prior_sample(h, generator, grad=backprop)
         hs.append(h)
         zs.append(z)

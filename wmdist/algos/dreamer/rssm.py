@@ -83,25 +83,17 @@ class RSSM(nn.Module):
             return h, Latent(index=torch.zeros(n, self.stoch, dtype=torch.long, device=device), classes=self.classes)
         return h, Latent(sample=torch.zeros(n, self.z_dim, device=device))
 
-    def img_step(
-        self, h: torch.Tensor, z: Latent, a: torch.Tensor | None, keep: torch.Tensor | None = None,
-        a_part: torch.Tensor | None = None,
-    ) -> torch.Tensor:
+    def img_step(self, h: torch.Tensor, z: Latent, a_part: torch.Tensor, keep: torch.Tensor | None = None) -> torch.Tensor:
         """h_t from (h_{t-1}, z_{t-1}, a_{t-1}); rows with keep = 0 restart from the zero state.
 
-        `a_part` replaces `a`: the action's share of the input layer, precomputed for a whole
-        sequence (`action_part`)."""
+        `a_part` is a_{t-1}'s share of the input layer, `action_part(a_{t-1})`: observe computes
+        it for a whole sequence in one matmul."""
         scale = None
         if keep is not None:
             scale = {"z": keep}
             h = h * keep
-            if a_part is not None:
-                a_part = a_part * keep.to(a_part.dtype)
-            else:
-                assert a is not None
-                a = a * keep
-        parts: dict[str, torch.Tensor | Latent] = {"z": z} if a_part is not None else {"z": z, "a": a}
-        x = self.img_in_act(self.img_in(parts, pre=a_part, scale=scale))
+            a_part = a_part * keep.to(a_part.dtype)
+        x = self.img_in_act(self.img_in({"z": z}, pre=a_part, scale=scale))
         return self.gru(x, h)
 
     def action_part(self, action: torch.Tensor) -> torch.Tensor:
@@ -146,7 +138,7 @@ class RSSM(nn.Module):
         h, z = self.initial(b, embed.device)
         hs, posts, zs = [], [], []
         for t in range(t_len):
-            h = self.img_step(h, z, None, keep[:, t] if resets[t] else None, a_part=a_part[:, t])
+            h = self.img_step(h, z, a_part[:, t], keep[:, t] if resets[t] else None)
             post = self.post(h, e_part[:, t])
             z = self.sample(post, generator)
             hs.append(h)
