@@ -140,27 +140,11 @@ def _imag_starts_case(b: int, t: int, quick: bool) -> dict:
     starts = {"all": 0, "128": 128}
     learners = {k: Dreamer(spec, DreamerConfig(version=3, deter=128, units=128, mlp_layers=2, stoch=32, classes=32,
                                               imag_starts=n)).make_learner() for k, n in starts.items()}
-    times = {k: 0.0 for k in starts}
-    for learner in learners.values():
-        learner.update(batch)  # warm-up
-    reps = 1 if quick else 3
-    for _ in range(reps):
-        for k, learner in learners.items():
-            t0 = time.perf_counter()
-            learner.update(batch)
-            times[k] += time.perf_counter() - t0
+    times = _time_side_by_side(learners, batch, 1 if quick else 3)
     return {"case": "v3_dmc_preset_continuous_imag_starts", "units": 128, "deter": 128, "batch": f"{b}x{t}",
-            "seconds_per_update_all_starts": round(times["all"] / reps, 3),
-            "seconds_per_update_128_starts": round(times["128"] / reps, 3),
+            "seconds_per_update_all_starts": round(times["all"], 3),
+            "seconds_per_update_128_starts": round(times["128"], 3),
             "speedup": round(times["all"] / times["128"], 2)}
-
-
-def _time_updates(learner, batch, updates: int) -> float:
-    learner.update(batch)  # warm-up
-    t0 = time.perf_counter()
-    for _ in range(updates):
-        learner.update(batch)
-    return (time.perf_counter() - t0) / updates
 
 
 def _time_side_by_side(learners: dict[str, object], batch, updates: int) -> dict[str, float]:
@@ -224,18 +208,18 @@ def run(quick: bool = False) -> Iterator[dict]:
     for discrete in (True, False):
         spec = bench_spec(discrete)
         batch = random_batch(spec, b, t)
-        learners = {"fp32": Dreamer(spec, small_v3(False)).make_learner()}
-        bb, bt = (b, t) if native else (2, 16)
-        bf16_batch = batch if native else random_batch(spec, bb, bt)
-        bf16_learner = Dreamer(spec, small_v3(True)).make_learner()
-        dt = _time_side_by_side(learners, batch, updates)["fp32"]
+        fp32 = Dreamer(spec, small_v3(False)).make_learner()
+        bf16 = Dreamer(spec, small_v3(True)).make_learner()
         if native:  # same batch: interleave the two precisions
-            both = _time_side_by_side({"fp32": learners["fp32"], "bf16": bf16_learner}, batch, updates)
-            dt, dt16 = both["fp32"], both["bf16"]
+            bb, bt = b, t
+            times = _time_side_by_side({"fp32": fp32, "bf16": bf16}, batch, updates)
         else:
-            dt16 = _time_side_by_side({"bf16": bf16_learner}, bf16_batch, 1)["bf16"]
-        flops = _update_flops(learners["fp32"], batch)
-        fast = bf16_learner if native else learners["fp32"]
+            bb, bt = 2, 16
+            times = _time_side_by_side({"fp32": fp32}, batch, updates)
+            times.update(_time_side_by_side({"bf16": bf16}, random_batch(spec, bb, bt), 1))
+        dt, dt16 = times["fp32"], times["bf16"]
+        flops = _update_flops(fp32, batch)
+        fast = bf16 if native else fp32
         yield {
             "case": f"v3_small_{'discrete' if discrete else 'continuous'}",
             "actor_grad": "reinforce" if discrete else "backprop",
@@ -245,7 +229,7 @@ def run(quick: bool = False) -> Iterator[dict]:
             "bf16_updates_per_s": round(1.0 / dt16, 3), "bf16_batch": f"{bb}x{bt}",
             "bf16_speedup": round(dt / dt16, 2) if native else None,
             "target_updates_per_s": 2.0,
-            "best_updates_per_s": round(1.0 / min(dt, dt16 if native else dt), 3),
+            "best_updates_per_s": round(1.0 / (min(dt, dt16) if native else dt), 3),
             "matmul_gflop_per_update": round(flops / 1e9, 1), "fp32_achieved_gflops": round(flops / 1e9 / dt, 1),
             "phase_seconds": {k: round(v, 3) for k, v in _split(fast, batch).items()},
             "phase_precision": "bf16" if native else "fp32",
@@ -258,7 +242,7 @@ def run(quick: bool = False) -> Iterator[dict]:
     pb, pt = (4, 16) if quick else (16, 32)
     batch = random_batch(spec, pb, pt)
     learner = Dreamer(spec, cfg).make_learner()
-    dt = _time_updates(learner, batch, updates)
+    dt = _time_side_by_side({"fp32": learner}, batch, updates)["fp32"]
     yield {"case": "v3_cartpole_preset_discrete_fp32", "units": 128, "deter": 128, "batch": f"{pb}x{pt}",
            "threads": threads, "updates_per_s": round(1.0 / dt, 3), "seconds_per_update": round(dt, 3),
            "phase_seconds": {k: round(v, 3) for k, v in _split(learner, batch).items()}}
