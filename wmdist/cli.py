@@ -38,14 +38,16 @@ def _parser() -> argparse.ArgumentParser:
                        "directory (runs/<name>-<time>) gets the resolved config, metrics.jsonl, checkpoints and "
                        "learning_curve.png.")
     t.add_argument("config", nargs="?", help="YAML config (see configs/)")
-    t.add_argument("--set", nargs="+", default=[], metavar="KEY=VALUE", help="dotted overrides, e.g. actors.num=8")
+    # extend: every `--set` counts (nargs="+" alone keeps only the last flag's list)
+    t.add_argument("--set", action="extend", nargs="+", default=[], metavar="KEY=VALUE",
+                   help="dotted overrides, e.g. actors.num=8")
     t.add_argument("--address", default=None, help="join a running Ray cluster ('auto' = the local one)")
     t.add_argument("--resume", default=None, metavar="RUN_DIR", help="continue a run from its latest checkpoint")
 
     c = sub.add_parser("config", help="print the resolved config (or every field's doc with --docs)",
                        description="Resolve defaults, overlays and --set overrides, check them, print YAML.")
     c.add_argument("config", nargs="?", help="YAML config")
-    c.add_argument("--set", nargs="+", default=[], metavar="KEY=VALUE", help="dotted overrides")
+    c.add_argument("--set", action="extend", nargs="+", default=[], metavar="KEY=VALUE", help="dotted overrides")
     c.add_argument("--docs", action="store_true", help="list every field with its default and doc")
 
     e = sub.add_parser("envs", help="list env families, or check an env id and print its spec",
@@ -92,6 +94,9 @@ def cmd_train(a: argparse.Namespace) -> int:
     from wmdist.runtime.train import train
 
     if a.resume:
+        if a.config:  # the run directory holds its own config: a second one would be ignored
+            raise UsageError(f"give a CONFIG or --resume RUN_DIR, not both (the run's own config is "
+                             f"{a.resume}/config.yaml; change it with --set)")
         overrides = list(a.set) + ([f"ray.address={a.address}"] if a.address else [])
         return train(resume=a.resume, overrides=overrides)
     overrides = list(a.set) + ([f"ray.address={a.address}"] if a.address else [])
@@ -117,14 +122,15 @@ def cmd_config(a: argparse.Namespace) -> int:
 
 def cmd_envs(a: argparse.Namespace) -> int:
     from wmdist.envs.config import EnvConfig
-    from wmdist.envs.factory import check_id, env_spec, list_families
+    from wmdist.envs.factory import check_id, list_families
+    from wmdist.runtime.train import env_spec_or_error
 
     if not a.id:
         for family, desc in list_families():
             print(f"{family:8s} {desc}")
         return 0
     check_id(a.id)
-    spec = env_spec(EnvConfig(id=a.id, pixels=a.pixels))
+    spec = env_spec_or_error(EnvConfig(id=a.id, pixels=a.pixels))
     for k, v in spec.__dict__.items():
         print(f"{k:18s} {v}")
     return 0

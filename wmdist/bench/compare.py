@@ -5,7 +5,10 @@ run's greedy-eval curve in one PNG, one colour per group.
         muzero=runs/plain reanalyze=runs/reanalyze
 
 Each GROUP=DIR names a `--runs-dir` of `wmdist.bench.learning` (run folders named
-`<config>-seed<N>-<time>`). Prints one JSON line per run and one per group.
+`<config>-seed<N>-<time>`). Prints one JSON line per run and one per group: the first
+crossing and the sustained figures of `wmdist.bench.learning.sustained` (mean of the last
+three evals at the budget, `met`, `sustained_from_env_steps`). The plot draws every seed
+thinly and, per group, the seeds' mean curve with a min-max band on a common env-step grid.
 """
 from __future__ import annotations
 
@@ -15,8 +18,7 @@ import re
 import sys
 from pathlib import Path
 
-from wmdist.bench.learning import first_reaching
-from wmdist.runtime.curves import read_jsonl
+from wmdist.bench.learning import eval_records, sustained
 
 
 def runs_in(folder: Path) -> dict[int, Path]:
@@ -29,12 +31,44 @@ def runs_in(folder: Path) -> dict[int, Path]:
     return out
 
 
+def band(curves: list[tuple[list[float], list[float]]]) -> tuple[list[float], list[float], list[float], list[float]]:
+    """(grid, mean, min, max) of several (env steps, return) curves on a common grid: the
+    union of their env steps, each curve interpolated linearly only inside its own span
+    (a seed counts at a grid point only where it has data on both sides or on it)."""
+    import numpy as np
+
+    curves = [(np.asarray(x, float), np.asarray(y, float)) for x, y in curves if len(x)]
+    if not curves:
+        return [], [], [], []
+    grid = np.unique(np.concatenate([x for x, _ in curves]))
+    vals = np.full((len(curves), len(grid)), np.nan)
+    for i, (x, y) in enumerate(curves):
+        order = np.argsort(x, kind="stable")
+        x, y = x[order], y[order]
+        inside = (grid >= x[0]) & (grid <= x[-1])
+        vals[i, inside] = np.interp(grid[inside], x, y)
+    have = ~np.isnan(vals).all(axis=0)
+    grid, vals = grid[have], vals[:, have]
+    return (grid.tolist(), np.nanmean(vals, axis=0).tolist(), np.nanmin(vals, axis=0).tolist(),
+            np.nanmax(vals, axis=0).tolist())
+
+
+def _mean(xs: list) -> float | None:
+    xs = [x for x in xs if x is not None]
+    return sum(xs) / len(xs) if xs else None
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("groups", nargs="+", metavar="GROUP=DIR")
     p.add_argument("--target", type=float, required=True)
     p.add_argument("--png", required=True)
+    p.add_argument("--budget-env-steps", type=int, default=None,
+                   help="judge each run on its evals up to this many env steps (default: all)")
+    p.add_argument("--budget-minutes", type=float, default=None,
+                   help="judge each run on its evals up to this much run time (default: all)")
     a = p.parse_args(argv)
+    budget_seconds = a.budget_minutes * 60 if a.budget_minutes is not None else None
     import matplotlib
 
     matplotlib.use("Agg")
@@ -49,18 +83,37 @@ def main(argv: list[str] | None = None) -> int:
             print(f"wmdist: expected GROUP=DIR, got {spec!r}", file=sys.stderr)
             return 2
         name, folder = spec.split("=", 1)
-        steps = []
+        results, curves = [], []
+        colour = colours[gi % len(colours)]
         for si, (seed, jsonl) in enumerate(sorted(runs_in(Path(folder)).items())):
-            res = first_reaching(jsonl, a.target)
+            res = sustained(jsonl, a.target, a.budget_env_steps, budget_seconds)
             print(json.dumps({"group": name, "seed": seed, "target": a.target, **res}), flush=True)
-            steps.append(res["env_steps_to_target"])
-            ev = [r for r in read_jsonl(jsonl) if r.get("kind") == "eval" and r.get("eval_return") is not None]
-            ax.plot([r["env_steps"] for r in ev], [r["eval_return"] for r in ev], color=colours[gi % len(colours)],
-                    linestyle=styles[si % len(styles)], marker=markers[si // len(styles) % len(markers)], alpha=0.8, label=f"{name} seed {seed}")
-        reached = [s for s in steps if s is not None]
+            results.append(res)
+            ev = eval_records(jsonl)
+            curves.append(([r["env_steps"] for r in ev], [r["eval_return"] for r in ev]))
+            ax.plot(*curves[-1], color=colour, linestyle=styles[si % len(styles)],
+                    marker=markers[si // len(styles) % len(markers)], markersize=3, linewidth=0.8, alpha=0.35,
+                    label=f"{name} seed {seed}")
+        grid, mean, lo, hi = band(curves)
+        if grid:
+            ax.fill_between(grid, lo, hi, color=colour, alpha=0.15, linewidth=0)
+            ax.plot(grid, mean, color=colour, linewidth=2.2, label=f"{name} mean of {len(curves)} (band: min-max)")
+        steps = [r["env_steps_to_target"] for r in results]
+        reached = [x for x in steps if x is not None]
+        last3 = [r["last3_mean"] for r in results if r["last3_mean"] is not None]
+        sus = [r["sustained_from_env_steps"] for r in results]
         print(json.dumps({"group": name, "runs": len(steps), "reached": len(reached),
-                          "mean_env_steps_to_target": sum(reached) / len(reached) if reached else None}), flush=True)
+                          "mean_env_steps_to_target": sum(reached) / len(reached) if reached else None,
+                          "met": sum(bool(r["met"]) for r in results),
+                          "last3_mean": _mean(last3),
+                          "last3_mean_min": min(last3, default=None), "last3_mean_max": max(last3, default=None),
+                          "last3_means": [r["last3_mean"] for r in results],
+                          "sustained_from_env_steps": sus,
+                          "max_sustained_from_env_steps": max((x for x in sus if x is not None), default=None)}),
+              flush=True)
     ax.axhline(a.target, color="grey", linestyle="--", linewidth=1)
+    if a.budget_env_steps is not None:
+        ax.axvline(a.budget_env_steps, color="grey", linestyle=":", linewidth=1)
     ax.set_xlabel("env steps")
     ax.set_ylabel("greedy eval return")
     ax.grid(alpha=0.3)

@@ -3,7 +3,9 @@ check of every key, type and range. Every problem is one `ConfigError` line."""
 from __future__ import annotations
 
 import dataclasses
+import math
 import os
+import re
 import types
 import typing
 from pathlib import Path
@@ -16,12 +18,36 @@ from wmdist.config.schema import RunConfig
 
 MAX_DEFAULTS_DEPTH = 8
 
+_FLOAT_TAG = "tag:yaml.org,2002:float"
+# PyYAML's YAML 1.1 float needs a dot and a signed exponent (`1.0e-4`), so `1e-4`, `3e5` and
+# `-.5` would load as strings; this is its pattern with those forms added (ints stay ints).
+_FLOAT = re.compile(r"""^(?:[-+]?[0-9][0-9_]*\.[0-9_]*(?:[eE][-+]?[0-9]+)?
+    |[-+]?[0-9][0-9_]*[eE][-+]?[0-9]+
+    |[-+]?\.[0-9][0-9_]*(?:[eE][-+]?[0-9]+)?
+    |[-+]?[0-9][0-9_]*(?::[0-5]?[0-9])+\.[0-9_]*
+    |[-+]?\.(?:inf|Inf|INF)
+    |\.(?:nan|NaN|NAN))$""", re.X)
+
+
+class _Loader(yaml.SafeLoader):
+    """SafeLoader that reads numbers as people write them (see `_FLOAT`)."""
+
+
+_Loader.yaml_implicit_resolvers = {
+    first: [(tag, _FLOAT if tag == _FLOAT_TAG else regexp) for tag, regexp in resolvers]
+    for first, resolvers in yaml.SafeLoader.yaml_implicit_resolvers.items()}
+
+
+def parse_yaml(text: str) -> Any:
+    """`yaml.safe_load` that also reads `1e-4`, `3e5`, `1E+3` and `.5` as floats."""
+    return yaml.load(text, Loader=_Loader)
+
 
 def _read_yaml(path: Path) -> dict:
     if not path.is_file():
         raise ConfigError(f"config file not found: {path}")
     try:
-        data = yaml.safe_load(path.read_text()) or {}
+        data = parse_yaml(path.read_text()) or {}
     except yaml.YAMLError as err:
         mark = getattr(err, "problem_mark", None)
         where = f" line {mark.line + 1}" if mark else ""
@@ -63,7 +89,7 @@ def apply_overrides(tree: dict, overrides: list[str]) -> dict:
         if not sep or not key.strip():
             raise ConfigError(f"override {item!r} is not of the form key.path=value")
         try:
-            value = yaml.safe_load(raw) if raw.strip() else ""
+            value = parse_yaml(raw) if raw.strip() else ""
         except yaml.YAMLError:
             value = raw
         parts = key.strip().split(".")
@@ -112,7 +138,13 @@ def _convert(value: Any, tp: Any, key: str) -> Any:
             return int(value)
     elif tp is float:
         if isinstance(value, (int, float)) and not isinstance(value, bool):
-            return float(value)
+            try:
+                number = float(value)
+            except OverflowError:  # an int past float's range
+                number = math.inf
+            if not math.isfinite(number):  # `.nan`/`.inf` pass every range check, then train garbage
+                raise ConfigError(f"{key}: {value!r} is not a finite number")
+            return number
     elif tp is str:
         if isinstance(value, str):
             return value
@@ -120,9 +152,8 @@ def _convert(value: Any, tp: Any, key: str) -> Any:
             return str(value)
     elif origin in (list, tuple) or tp in (list, tuple):
         if isinstance(value, (list, tuple)):
-            args = typing.get_args(tp)
-            inner = args[0] if args else Any
-            items = [_convert(v, inner, f"{key}[{i}]") for i, v in enumerate(value)]
+            item_types = _item_types(tp, len(value), key)
+            items = [_convert(v, t, f"{key}[{i}]") for i, (v, t) in enumerate(zip(value, item_types))]
             return tuple(items) if (origin or tp) is tuple else items
     elif origin is dict or tp is dict:
         if isinstance(value, dict):
@@ -132,7 +163,21 @@ def _convert(value: Any, tp: Any, key: str) -> Any:
     raise ConfigError(f"{key}: expected {_type_name(tp)}, got {type(value).__name__} {value!r}")
 
 
+def _item_types(tp: Any, length: int, key: str) -> list:
+    """The element types of a `length`-item value of `list[T]`, `tuple[T, ...]`, `tuple[A, B]`, `list`."""
+    args = typing.get_args(tp)
+    if typing.get_origin(tp) is tuple and args and not (len(args) == 2 and args[1] is Ellipsis):
+        if length != len(args):  # a fixed-length tuple: one value per declared type
+            raise ConfigError(f"{key}: expected {len(args)} items, got {length}")
+        return list(args)
+    return [args[0] if args else Any] * length
+
+
 def _check_range(value: Any, meta: dict, key: str) -> None:
+    if isinstance(value, (list, tuple)):  # a list of widths/steps: each element has the field's range
+        for i, item in enumerate(value):
+            _check_range(item, meta, f"{key}[{i}]")
+        return
     if value is None or isinstance(value, bool):
         return
     choices = meta.get("choices")

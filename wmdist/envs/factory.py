@@ -58,6 +58,16 @@ def _unknown(env_id: str, candidates: list[str]) -> ValueError:
     )
 
 
+def _check_dmc_task(name: str, names: list[str]) -> None:
+    """A bare domain (`dmc:cartpole`) gets its own message: the closest match alone
+    (`dmc:cartpole-swingup`) would not say that the task is what is missing."""
+    domain = name[:-1] if name.endswith("-") else name
+    tasks = [f"dmc:{n}" for n in names if n.partition("-")[0] == domain]
+    if "-" not in domain and tasks:
+        raise ValueError(f"dmc:{domain} names a domain but no task: dmc ids are dmc:<domain>-<task>, "
+                         f"e.g. {', '.join(tasks)}")
+
+
 def check_id(env_id: str) -> str:
     """Return `env_id` if it names a known env, else raise a one-line ValueError that lists
     the families and the closest known id."""
@@ -82,6 +92,8 @@ def check_id(env_id: str) -> str:
         names = _names(family)
         if name in names:
             return env_id
+        if family == "dmc":
+            _check_dmc_task(name, names)
         raise _unknown(env_id, [f"{family}:{n}" for n in names])
     # No or unknown prefix: compare against every family (a bare gymnasium id is common).
     candidates = [f"{f}:{n}" for f in _FAMILIES for n in _names(f)]

@@ -3,6 +3,12 @@
 Binds 127.0.0.1 on a free port, requires a generated password, keeps its data and AOF in
 the given directory. The password and the config that holds it are written with mode 0600
 (never on the command line, where `ps` would show it). Stopped by `stop()`.
+
+The server runs in a session of its own, so a terminal's Ctrl-C reaches the driver only and
+the driver decides when replay stops (after its final checkpoint). With `die_with_parent`
+the kernel sends it SIGTERM (a clean AOF shutdown) if the process that started it dies,
+even by SIGKILL; a server left by an older process on the same directory is found through
+its pid file and stopped before a new one starts (`stop_stale`).
 """
 from __future__ import annotations
 
@@ -17,6 +23,8 @@ import time
 import redis
 
 PASSWORD_FILE = "redis.pass"
+PID_FILE = "redis.pid"
+_PR_SET_PDEATHSIG = 1  # prctl(2) option: signal this process when its parent thread dies
 
 
 def free_port() -> int:
@@ -32,8 +40,51 @@ def _write_private(path: str, text: str) -> None:
     os.chmod(path, 0o600)
 
 
+def _die_with_parent() -> None:
+    """In the child before exec (Linux): SIGTERM when the parent dies."""
+    import ctypes
+
+    try:
+        ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, signal.SIGTERM, 0, 0, 0)
+    except (OSError, AttributeError):  # not Linux: the pid file still lets a resume stop it
+        pass
+
+
+def _serves(pid: int, directory: str) -> bool:
+    """pid is a live redis-server working in `directory` (redis rewrites its command line, so
+    the working directory, where we start it, is what identifies it)."""
+    try:
+        with open(f"/proc/{pid}/cmdline", "rb") as f:
+            if b"redis-server" not in f.read():
+                return False
+        return os.path.realpath(os.readlink(f"/proc/{pid}/cwd")) == os.path.realpath(directory)
+    except OSError:
+        return False
+
+
+def stop_stale(directory: str, timeout: float = 15.0) -> bool:
+    """Stop a redis-server that an earlier process left running on `directory` (its pid file
+    names it). True if one was stopped."""
+    directory = os.path.abspath(directory)
+    try:
+        with open(os.path.join(directory, PID_FILE), encoding="utf-8") as f:
+            pid = int(f.read().strip())
+    except (OSError, ValueError):
+        return False
+    if not _serves(pid, directory):
+        return False  # gone, or the pid was reused by another program: leave it alone
+    os.kill(pid, signal.SIGTERM)  # a clean shutdown: the AOF is flushed
+    deadline = time.monotonic() + timeout
+    while _serves(pid, directory) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    if _serves(pid, directory):
+        os.kill(pid, signal.SIGKILL)
+    return True
+
+
 class RedisServer:
-    def __init__(self, directory: str, appendfsync: str = "everysec", aof: bool = True, port: int = 0) -> None:
+    def __init__(self, directory: str, appendfsync: str = "everysec", aof: bool = True, port: int = 0,
+                 die_with_parent: bool = False) -> None:
         if appendfsync not in ("always", "everysec", "no"):
             raise ValueError(f"appendfsync must be always, everysec or no, got {appendfsync!r}")
         exe = shutil.which("redis-server")
@@ -48,12 +99,13 @@ class RedisServer:
         with open(self.password_file, encoding="utf-8") as f:
             self.password = f.read().strip()
         self.port = port or free_port()
+        self.die_with_parent = die_with_parent
         self.conf = os.path.join(self.dir, "redis.conf")
         _write_private(self.conf, "\n".join([
             "bind 127.0.0.1", "protected-mode yes", f"port {self.port}", f"dir {self.dir}",
             f"requirepass {self.password}", f"appendonly {'yes' if aof else 'no'}",
             f"appendfsync {appendfsync}", 'save ""', "daemonize no", "loglevel warning",
-            "logfile redis.log", "maxmemory-policy noeviction", "",
+            "logfile redis.log", "maxmemory-policy noeviction", f"pidfile {os.path.join(self.dir, PID_FILE)}", "",
         ]))
         self.proc: subprocess.Popen | None = None
 
@@ -66,8 +118,11 @@ class RedisServer:
         return redis.Redis(host="127.0.0.1", port=self.port, password=self.password)
 
     def start(self, timeout: float = 10.0) -> "RedisServer":
+        stop_stale(self.dir)
         self.proc = subprocess.Popen([self.exe, self.conf], cwd=self.dir, stdin=subprocess.DEVNULL,
-                                     stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+                                     stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                                     start_new_session=True,  # not in the terminal's process group
+                                     preexec_fn=_die_with_parent if self.die_with_parent else None)
         deadline = time.monotonic() + timeout
         while True:
             try:
@@ -79,6 +134,17 @@ class RedisServer:
                 self.stop()
                 raise RuntimeError(f"redis-server did not start on 127.0.0.1:{self.port} (see {self.dir}/redis.log)")
             time.sleep(0.02)
+
+    @property
+    def alive(self) -> bool:
+        return self.proc is not None and self.proc.poll() is None
+
+    def restart(self, timeout: float = 30.0) -> "RedisServer":
+        """Start again on the same port and directory (the AOF brings the data back)."""
+        if self.alive:
+            return self
+        self.proc = None
+        return self.start(timeout)
 
     def kill(self) -> None:
         """SIGKILL (for durability tests): no shutdown save, only what the AOF holds survives."""

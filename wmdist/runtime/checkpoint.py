@@ -38,7 +38,7 @@ def save_checkpoint(run_dir: str | Path, learner_state: dict, weights: dict[str,
     name = f"ckpt-{int(counters.get('updates', 0)):09d}-{int(counters.get('env_steps', 0)):012d}"
     final = root / name
     tmp = root / f".{name}.tmp"
-    shutil.rmtree(tmp, ignore_errors=True)
+    clean_partial(run_dir)
     tmp.mkdir()
     torch.save(_tensorise(learner_state), tmp / "learner.pt")
     np.savez(tmp / "weights.npz", **{k: np.asarray(v) for k, v in weights.items()})
@@ -50,6 +50,16 @@ def save_checkpoint(run_dir: str | Path, learner_state: dict, weights: dict[str,
     for old in list_checkpoints(run_dir)[:-keep]:
         shutil.rmtree(old, ignore_errors=True)
     return final
+
+
+def clean_partial(run_dir: str | Path) -> int:
+    """Remove the temporary folders of checkpoints whose write never finished (a crash or a
+    kill mid-write); returns how many there were."""
+    root = Path(run_dir) / CKPT_DIR
+    stale = list(root.glob(".ckpt-*.tmp")) if root.is_dir() else []
+    for p in stale:
+        shutil.rmtree(p, ignore_errors=True)
+    return len(stale)
 
 
 def list_checkpoints(run_dir: str | Path) -> list[Path]:

@@ -11,6 +11,7 @@ dying ends the run with a message that names --resume.
 from __future__ import annotations
 
 import collections
+import logging
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -19,10 +20,22 @@ from typing import Any, Callable
 import numpy as np
 
 from wmdist.runtime.checkpoint import save_checkpoint
-from wmdist.runtime.topology import ACTOR_DIED, Topology
+from wmdist.runtime.faults import died as _died
+from wmdist.runtime.faults import failed_to_start as _failed_to_start
+from wmdist.runtime.faults import one_line as _one_line
+from wmdist.runtime.faults import root_cause as _root_cause
+from wmdist.runtime.faults import transient
+from wmdist.runtime.topology import Topology
 
 LEARNER_SLICE_SECONDS = 1.0
 RETRY_SECONDS = 0.5  # wait before re-asking an actor whose process died
+REPLAY_RETRY_SECONDS = 1.0  # wait before re-asking a role that could not reach the replay store
+# A replay store unreachable this long ends the run (one line naming --resume); shorter outages
+# (a redis-server restarted by the driver or by hand) are ridden out.
+REPLAY_OUTAGE_SECONDS = 60.0
+SERVICE_CHECK_SECONDS = 1.0  # how often the driver looks at its private redis-server
+
+log = logging.getLogger("wmdist")  # the run's log file (train.py); never the console
 
 
 @dataclass
@@ -38,7 +51,7 @@ class Counters:
     sampled_sequences: int = 0
     nan_skips: int = 0
     eval_episodes: int = 0
-    restarts: dict = field(default_factory=lambda: {"collector": 0, "reanalyzer": 0, "evaluator": 0})
+    restarts: dict = field(default_factory=lambda: {"collector": 0, "reanalyzer": 0, "evaluator": 0, "redis": 0})
     busy: dict = field(default_factory=lambda: {"collector": 0.0, "learner": 0.0, "reanalyzer": 0.0, "evaluator": 0.0})
 
     def as_dict(self) -> dict:
@@ -58,10 +71,6 @@ class RunResult:
     status: str  # "done" | "interrupted" | "nan_stop" | "learner_failed" | "error"
     message: str
     counters: Counters
-
-
-def _died(err: BaseException) -> bool:
-    return type(err).__name__ in ACTOR_DIED or any(t.__name__ in ACTOR_DIED for t in type(err).__mro__)
 
 
 class Driver:
@@ -89,6 +98,10 @@ class Driver:
         self.rates = {"env_steps": 0.0, "updates": 0.0}
         self._rate_base = (time.monotonic(), counters.env_steps, counters.updates)
         self.last_snapshot: dict = {}
+        self.outage_since: float | None = None  # when a role first found the replay store unreachable
+        self.last_service_check = time.monotonic()
+        self.checkpoint_error: str | None = None  # why the last checkpoint could not be written
+        self.last_checkpoint: Path | None = None
 
     def request_stop(self, reason: str = "stopped on request") -> None:
         """Ask the loop (possibly running in another thread) to stop at its next turn."""
@@ -182,6 +195,30 @@ class Driver:
             return
         self._issue(kind, i)
 
+    # -- services ------------------------------------------------------------------------
+    def _revive_services(self) -> None:
+        """Restart the private redis-server if it died (same port and AOF); counted."""
+        try:
+            if self.topo.replay.revive_server():
+                self.c.restarts["redis"] = self.c.restarts.get("redis", 0) + 1
+        except Exception as err:  # noqa: BLE001 - it will not come back: the outage clock decides
+            self._replay_outage(err)
+
+    def _replay_outage(self, err: BaseException | str) -> bool:
+        """Note that a role could not reach the replay store; True (and a stop reason) once it has
+        been unreachable for REPLAY_OUTAGE_SECONDS."""
+        now = time.monotonic()
+        if self.outage_since is None:
+            self.outage_since = now
+            return False
+        if now - self.outage_since < REPLAY_OUTAGE_SECONDS:
+            return False
+        where = getattr(self.topo.replay, "server_url", "") or "the replay store"
+        why = err if isinstance(err, str) else _root_cause(err)
+        self.stop_reason = ("error", f"replay at {where} has been unreachable for {REPLAY_OUTAGE_SECONDS:.0f}s "
+                            f"({why})")
+        return True
+
     # -- the loop ------------------------------------------------------------------------
     def elapsed(self) -> float:
         return self.elapsed0 + time.monotonic() - self.t_start
@@ -218,6 +255,11 @@ class Driver:
                         if _failed_to_start(err):  # a restart would fail the same way
                             self.stop_reason = ("error", f"{kind} {i} could not start: {_root_cause(err)}")
                             break
+                        if transient(err):  # the replay store is away: ask again once it may be back
+                            if self._replay_outage(err):
+                                break
+                            self.retry_at[(kind, i)] = time.monotonic() + REPLAY_RETRY_SECONDS
+                            continue
                         if _died(err):  # Ray restarts it; ask again shortly (counted when it answers)
                             if self._restarts_used_up(kind, i):
                                 self.stop_reason = ("error", f"{kind} {i} died and its restarts are used up "
@@ -230,7 +272,15 @@ class Driver:
                             self.stop_reason = ("error", f"collector {i} failed: {_one_line(err)}")
                             break
                         raise
+                    if kind == "learner" and res.get("status") == "replay_down":
+                        self._note_process(kind, i, res)
+                        if self._replay_outage(res["message"]):
+                            break
+                        self.retry_at[(kind, i)] = time.monotonic() + REPLAY_RETRY_SECONDS
+                        continue
                     self._handle(kind, i, res)
+                    if kind in ("collector", "learner"):
+                        self.outage_since = None  # a call that went through: replay is reachable
                     if kind == "learner":
                         self._maybe_checkpoint()
                     self._reissue(kind, i)
@@ -239,6 +289,9 @@ class Driver:
                         self.waiting_reanalyzers.discard(i)
                         self._issue("reanalyzer", i)
                 now = time.monotonic()
+                if now - self.last_service_check >= SERVICE_CHECK_SECONDS:
+                    self.last_service_check = now
+                    self._revive_services()
                 for (kind, i), at in list(self.retry_at.items()):
                     if now >= at:
                         del self.retry_at[(kind, i)]
@@ -258,10 +311,16 @@ class Driver:
         except KeyboardInterrupt:
             self.stop_reason = ("interrupted", "interrupted by the user")
         status, message = self.stop_reason
-        self._drain()
-        self.tick(force_plot=True)
+        try:
+            self._drain()
+            self.tick(force_plot=True)
+        except KeyboardInterrupt:  # a second Ctrl-C: skip the drain, still checkpoint
+            status, message = "interrupted", "interrupted by the user"
         if status != "learner_failed":
-            self.checkpoint()
+            try:
+                self.checkpoint()
+            except KeyboardInterrupt:  # the write is atomic: the previous checkpoint stays
+                status, message = "interrupted", "interrupted by the user during the final checkpoint"
         return RunResult(status, message, self.c)
 
     def _drain(self, timeout: float = 30.0) -> None:
@@ -287,6 +346,8 @@ class Driver:
             self.checkpoint()
 
     def checkpoint(self) -> Path | None:
+        """Write a checkpoint; None (and `checkpoint_error` set, the traceback in the log) when it
+        could not be written. A checkpoint is complete or absent: the last good one stays."""
         import ray
 
         self.last_ckpt = time.monotonic()
@@ -297,8 +358,21 @@ class Driver:
         except Exception:  # noqa: BLE001 - the learner is gone: nothing newer to save
             return None
         replay = self.topo.replay if self.cfg.checkpoint.replay else None
-        return save_checkpoint(self.topo.run_dir, state, weights, version, self.c.as_dict(), replay,
-                               self.cfg.checkpoint.keep)
+        for attempt in range(2):
+            try:
+                path = save_checkpoint(self.topo.run_dir, state, weights, version, self.c.as_dict(), replay,
+                                       self.cfg.checkpoint.keep)
+            except Exception as err:  # noqa: BLE001 - reported in one line by the caller
+                log.exception("checkpoint failed")
+                self.checkpoint_error = _root_cause(err)
+                if attempt == 0 and transient(err):  # replay's server may be restarting: once more
+                    time.sleep(REPLAY_RETRY_SECONDS)
+                    self._revive_services()
+                    continue
+                return None
+            self.last_checkpoint, self.checkpoint_error = path, None
+            return path
+        return None
 
     def _log(self, record: dict) -> None:
         if self.log_path is None:
@@ -352,23 +426,3 @@ class Driver:
             except Exception:  # noqa: BLE001 - a plot must never stop training
                 pass
         return snap
-
-
-def _failed_to_start(err: BaseException) -> bool:
-    """The actor's constructor raised (Ray reports it as a death in the creation task)."""
-    return _died(err) and "creation task" in str(err)
-
-
-def _root_cause(err: BaseException) -> str:
-    """The last 'SomeError: message' line of a remote traceback, else the last line."""
-    lines = [ln.strip() for ln in str(err).splitlines() if ln.strip()]
-    for ln in reversed(lines):
-        head = ln.split(":", 1)[0]
-        if head.isidentifier() and (head.endswith("Error") or head.endswith("Exception")):
-            return ln[:400]
-    return lines[-1][:400] if lines else type(err).__name__
-
-
-def _one_line(err: BaseException) -> str:
-    text = str(err).strip().splitlines()
-    return f"{type(err).__name__}: {text[-1] if text else ''}"[:400]

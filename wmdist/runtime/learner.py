@@ -17,6 +17,7 @@ import numpy as np
 from wmdist.algos.base import NonFiniteLoss
 from wmdist.config.schema import RunConfig
 from wmdist.envs.spec import EnvSpec
+from wmdist.runtime.faults import root_cause, transient
 from wmdist.runtime.roles import build_algorithm, device_for, set_threads
 
 
@@ -107,6 +108,8 @@ class LearnerRole:
         pf = self._ensure_prefetch()
         if pf.error is not None:
             err, pf.error = pf.error, None
+            if transient(err):  # the store is restarting: the driver asks again shortly
+                return self._stats("replay_down", f"sampling failed: {root_cause(err)}")
             return self._stats("error", f"sampling failed: {err}")
         end = time.monotonic() + seconds
         status, message = "ok", ""

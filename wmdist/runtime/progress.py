@@ -75,7 +75,42 @@ class _View:
         return float(sum(sizes)) if sizes else None
 
 
+    def troubles(self) -> str:
+        """Drops and restarts that are not zero, e.g. `drops corrupt 3 | restarts collector 1`
+        ('' when there are none). FIFO evictions are the buffer working as meant: not shown."""
+        drops: dict[str, float] = {}
+        restarts: dict[str, float] = {}
+        replay = self.s.get("replay")
+        if isinstance(replay, Mapping):
+            for k, v in replay.items():
+                m = _SUMMED_DROP.match(str(k))
+                if m and isinstance(v, (int, float)):
+                    drops[m.group(1)] = float(v)
+            for role, v in (self.s.get("restarts") or {}).items():
+                if isinstance(v, (int, float)):
+                    restarts[str(role)] = float(v)
+        else:
+            for k, v in self.s.items():
+                m = _HUB_DROP.match(k)
+                if m:
+                    drops[m.group(1)] = drops.get(m.group(1), 0.0) + float(v)
+                m = _HUB_RESTART.match(k)
+                if m:
+                    restarts[m.group(1)] = float(v)
+        parts = []
+        shown = [f"{r} {_num(n)}" for r, n in sorted(drops.items()) if n and r != "evicted"]
+        if shown:
+            parts.append("drops " + ", ".join(shown))
+        shown = [f"{r} {_num(n)}" for r, n in sorted(restarts.items()) if n]
+        if shown:
+            parts.append("restarts " + ", ".join(shown))
+        return " | ".join(parts)
+
+
 _SHARD_SIZE = re.compile(r"^shard\d+_size_steps$")
+_SUMMED_DROP = re.compile(r"^drops_(\w+)$")  # the replay stats' sums over shards
+_HUB_DROP = re.compile(r"^wmdist_replay_drops_total\{shard=\d+,reason=(\w+)\}$")
+_HUB_RESTART = re.compile(r"^wmdist_actor_restarts_total\{role=(\w+)\}$")
 
 
 class Progress:
@@ -143,6 +178,9 @@ class Progress:
             f" gap {_num(v.num('version_gap', 'wmdist_weights_version_gap'))}",
             f"{_dur(elapsed)} eta {_dur(eta)}",
         ]
+        troubles = v.troubles()
+        if troubles:
+            parts.append(troubles)
         return " | ".join(parts)
 
     def update(self, snapshot: Mapping[str, Any]) -> None:

@@ -383,6 +383,19 @@ class ReplayClient:
                  for i, s in enumerate(self.shards)])
         ray.get(self.limiter.load_state_dict.remote(state))
 
+    def revive_server(self) -> bool:
+        """Owner with a private redis-server: start it again (same port, directory and AOF) if
+        its process has died. True when it was restarted; the clients reconnect on their own."""
+        if self._server is None or self._closed or self._server.alive:
+            return False
+        self._server.restart()
+        return True
+
+    @property
+    def server_url(self) -> str:
+        """Where the record bytes live ('' for the memory backend)."""
+        return self._redis_url
+
     def close(self) -> None:
         """Owner: wake every waiter of the service (they return False/None), then stop the
         actors and the private redis-server. A pickled copy only stops using the service."""
@@ -443,7 +456,9 @@ def create_replay(cfg: ReplayConfig, fields: dict[str, FieldSpec], run_dir: str,
         else:
             from wmdist.replay.redis_server import RedisServer
 
-            server = RedisServer(os.path.join(run_dir, "redis"), cfg.redis_appendfsync, cfg.redis_aof).start()
+            # dies with the driver (even on SIGKILL) when the driver is its main thread
+            server = RedisServer(os.path.join(run_dir, "redis"), cfg.redis_appendfsync, cfg.redis_aof,
+                                 die_with_parent=threading.current_thread() is threading.main_thread()).start()
             url, pwfile = server.url, server.password_file
     namespaces = [f"wmdist:{run_name}:s{i}" for i in range(cfg.shards)]
     shard_cls = ray.remote(ShardActor).options(num_cpus=cfg.shard_cpus, max_concurrency=8, max_restarts=-1,

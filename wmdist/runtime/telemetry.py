@@ -60,14 +60,17 @@ _SHARD_METRICS = {"size_steps": "wmdist_replay_size_steps", "inserts": "wmdist_r
 class Telemetry:
     """Owns the metrics exporter and the console progress view of one training run."""
 
-    def __init__(self, cfg: RunConfig, run_dir: Path, out: IO[str]) -> None:
+    def __init__(self, cfg: RunConfig, run_dir: Path, out: IO[str], hub=None) -> None:
+        """`hub`: an exporter already bound (`wmdist train` binds it before Ray starts, so a busy
+        port is a one-line error); None starts one here when metrics are enabled."""
         from wmdist.metrics import MetricsHub
         from wmdist.runtime.progress import Progress
 
-        self.hub = None
-        if cfg.metrics.enabled:
+        self.hub = hub
+        if self.hub is None and cfg.metrics.enabled:
             self.hub = MetricsHub(host=cfg.metrics.host, port=cfg.metrics.port)
             self.hub.start()
+        if self.hub is not None:
             (run_dir / "metrics_port").write_text(str(self.hub.port))
             print(f"wmdist: metrics at {self.hub.url}", file=out, flush=True)
         self.progress = Progress(cfg.run.max_env_steps, cfg.run.max_minutes, stream=out)

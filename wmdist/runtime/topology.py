@@ -19,8 +19,6 @@ from wmdist.config.schema import RunConfig
 from wmdist.envs.spec import EnvSpec
 from wmdist.runtime.resources import BROKER_CPUS, check_fits, roles
 
-# Actor errors that mean "the process died" (Ray restarts collectors and reanalyzers).
-ACTOR_DIED = ("RayActorError", "ActorDiedError", "ActorUnavailableError")
 
 
 def start_ray(cfg: RunConfig) -> None:

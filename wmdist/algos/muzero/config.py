@@ -22,7 +22,8 @@ class MuZeroConfig:
     # networks
     network: str = param("auto", "network family: mlp (vector obs), conv (images) or auto", choices=("auto", "mlp", "conv"))
     latent_dim: int = param(64, "mlp: hidden-state width", ge=1)
-    hidden: list = param([64], "mlp: hidden layer widths of every function; conv: widths of the head MLPs")
+    # typed elements: a bare `list` let [1.5] through (a width-1 net) and [[1]] crash validate()
+    hidden: list[int] = param([64], "mlp: hidden layer widths of every function; conv: widths of the head MLPs", ge=1)
     conv_channels: int = param(256, "conv: channels of the residual towers (paper: 256)", ge=2)
     conv_blocks: int = param(16, "conv: residual blocks in each of h, g, f (paper: 16)", ge=0)
     conv_head_channels: int = param(2, "conv: channels of the 1x1 conv before each head", ge=1)
@@ -47,8 +48,8 @@ class MuZeroConfig:
                                             "(AlphaGo Zero's augmentation; not in the MuZero paper)")
 
     # acting
-    visit_temperatures: list = param([1.0, 0.5, 0.25], "visit-count temperatures in turn (paper Atari: 1, 0.5, 0.25)")
-    temperature_env_steps: list = param([10_000, 20_000], "env steps at which the next temperature starts")
+    visit_temperatures: list[float] = param([1.0, 0.5, 0.25], "visit-count temperatures in turn (paper Atari: 1, 0.5, 0.25)", ge=0)
+    temperature_env_steps: list[int] = param([10_000, 20_000], "env steps at which the next temperature starts", ge=0)
     temperature_moves: int = param(0, "board games: moves per episode at temperature 1 before playing greedily (0 = use the env-step schedule)", ge=0)
 
     def validate(self) -> "MuZeroConfig":

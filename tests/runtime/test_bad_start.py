@@ -1,0 +1,150 @@
+"""Bad input to `wmdist train`: one line on stderr, exit status 2, nothing started or written.
+
+Each case runs the real CLI in-process; none gets as far as starting Ray (the checks run
+first), so a case that did would be slow and would leave a run directory behind.
+"""
+from __future__ import annotations
+
+import shutil
+import socket
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from wmdist.cli import main
+from wmdist.config.loader import dump_yaml, load_config
+from wmdist.runtime.checkpoint import CKPT_DIR, clean_partial, latest_checkpoint, save_checkpoint
+
+ROOT = Path(__file__).resolve().parents[2]
+FAKE = str(Path(__file__).parent / "fake.yaml")
+MUZERO = str(ROOT / "configs" / "muzero_cartpole.yaml")
+
+
+def _one_line_exit_2(capsys, argv: list[str]) -> str:
+    assert main(argv) == 2
+    captured = capsys.readouterr()
+    lines = captured.err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("wmdist: error: "), captured.err
+    assert "Traceback" not in captured.out + captured.err
+    return lines[0]
+
+
+@pytest.fixture
+def busy_port():
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        s.listen()
+        yield s.getsockname()[1]
+
+
+def test_busy_metrics_port_fails_before_anything_starts(tmp_path, capsys, busy_port):
+    line = _one_line_exit_2(capsys, ["train", FAKE, "--set", f"run.dir={tmp_path}", "metrics.enabled=true",
+                                     f"metrics.port={busy_port}"])
+    assert f"metrics.port {busy_port}" in line
+    assert not any(tmp_path.iterdir()), "a run directory was created"
+
+
+def test_more_cpus_than_the_machine_fails_before_ray_starts(tmp_path, capsys):
+    import ray
+
+    line = _one_line_exit_2(capsys, ["train", FAKE, "--set", f"run.dir={tmp_path}", "actors.num=64",
+                                     "actors.cpus=1"])
+    assert "CPU" in line and "actors.num" in line
+    assert not ray.is_initialized() and not any(tmp_path.iterdir())
+
+
+def test_uncreatable_run_dir_is_one_line(tmp_path, capsys):
+    blocker = tmp_path / "file"
+    blocker.write_text("not a folder")
+    line = _one_line_exit_2(capsys, ["train", FAKE, "--set", f"run.dir={blocker}/runs"])
+    assert "run.dir" in line
+
+
+@pytest.mark.parametrize("url, message", [
+    ("127.0.0.1:6379", "must start with redis://"),
+    ("redis://127.0.0.1:{closed}/0", "nothing answers there"),
+])
+def test_unreachable_redis_is_one_line(tmp_path, capsys, url, message):
+    with socket.socket() as s:  # a port that was free a moment ago: nothing listens there
+        s.bind(("127.0.0.1", 0))
+        closed = s.getsockname()[1]
+    line = _one_line_exit_2(capsys, ["train", FAKE, "--set", f"run.dir={tmp_path}", "replay.backend=redis",
+                                     f"replay.redis_url={url.format(closed=closed)}"])
+    assert message in line
+    assert not any(tmp_path.iterdir())
+
+
+def test_redis_password_problems_are_one_line(tmp_path, capsys):
+    from wmdist.replay.redis_server import RedisServer
+
+    server = RedisServer(str(tmp_path / "redis")).start()
+    try:
+        wrong = tmp_path / "wrong.pass"
+        wrong.write_text("not-the-password")
+        base = ["train", FAKE, "--set", f"run.dir={tmp_path / 'runs'}", "replay.backend=redis",
+                f"replay.redis_url={server.url}"]
+        assert "password was refused" in _one_line_exit_2(capsys, base + [f"replay.redis_password_file={wrong}"])
+        assert "wants a password" in _one_line_exit_2(capsys, base)
+        missing = tmp_path / "missing.pass"
+        assert "no such file" in _one_line_exit_2(capsys, base + [f"replay.redis_password_file={missing}"])
+    finally:
+        server.stop()
+    assert not (tmp_path / "runs").exists()
+
+
+def test_config_with_resume_is_refused(tmp_path, capsys):
+    assert "not both" in _one_line_exit_2(capsys, ["train", FAKE, "--resume", str(tmp_path)])
+
+
+def _muzero_run(tmp_path: Path, overrides: list[str] | None = None) -> Path:
+    """A run directory with one checkpoint of MuZero's real learner (no Ray needed)."""
+    from wmdist.runtime.roles import build_algorithm
+    from wmdist.runtime.train import env_spec_or_error
+
+    cfg = load_config(MUZERO, [f"run.dir={tmp_path}", *(overrides or [])])
+    algo = build_algorithm(cfg, env_spec_or_error(cfg), 0)
+    learner = algo.make_learner("cpu")
+    run_dir = tmp_path / "run"
+    run_dir.mkdir(parents=True)
+    (run_dir / "config.yaml").write_text(dump_yaml(cfg))
+    state = {"learner": learner.state_dict(), "updates": 5, "version": 1, "nan_skips": 0, "sampled_sequences": 0}
+    save_checkpoint(run_dir, state, learner.get_weights(), 1, {"updates": 5, "env_steps": 100}, None, keep=2)
+    return run_dir
+
+
+def test_resume_that_changes_the_model_is_refused_and_leaves_the_run_as_it_was(tmp_path, capsys):
+    run_dir = _muzero_run(tmp_path)
+    before = (run_dir / "config.yaml").read_text()
+    line = _one_line_exit_2(capsys, ["train", "--resume", str(run_dir), "--set", "algo.hidden=[32]"])
+    assert "does not fit the model" in line
+    line = _one_line_exit_2(capsys, ["train", "--resume", str(run_dir), "--set", "env.id=board:tictactoe"])
+    assert (run_dir / "config.yaml").read_text() == before, "a failed resume rewrote config.yaml"
+    assert sorted(p.name for p in run_dir.iterdir()) == [CKPT_DIR, "config.yaml"]
+
+
+def test_checkpoint_of_another_model_is_one_line(tmp_path, capsys):
+    run_dir = _muzero_run(tmp_path / "a")
+    other = _muzero_run(tmp_path / "b", ["algo.hidden=[16, 16]"])
+    ckpt = latest_checkpoint(run_dir)
+    shutil.rmtree(ckpt)
+    shutil.copytree(latest_checkpoint(other), ckpt)  # someone copied the wrong checkpoint in
+    assert "does not fit the model" in _one_line_exit_2(capsys, ["train", "--resume", str(run_dir)])
+
+
+def test_unreadable_checkpoint_is_one_line(tmp_path, capsys):
+    run_dir = _muzero_run(tmp_path)
+    (latest_checkpoint(run_dir) / "learner.pt").write_bytes(b"\x80\x04not a checkpoint")
+    assert "cannot be read" in _one_line_exit_2(capsys, ["train", "--resume", str(run_dir)])
+
+
+def test_half_written_checkpoints_are_cleaned_up(tmp_path):
+    w = {"w": np.zeros((2, 2), np.float32)}
+    save_checkpoint(tmp_path, {"w": w["w"]}, w, 1, {"updates": 1, "env_steps": 1}, None, keep=2)
+    stale = tmp_path / CKPT_DIR / ".ckpt-000000009-000000000009.tmp"
+    stale.mkdir()
+    (stale / "learner.pt").write_bytes(b"partial")
+    save_checkpoint(tmp_path, {"w": w["w"]}, w, 2, {"updates": 2, "env_steps": 2}, None, keep=2)
+    assert not stale.exists()
+    stale.mkdir()
+    assert clean_partial(tmp_path) == 1 and not stale.exists()

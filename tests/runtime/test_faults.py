@@ -1,0 +1,176 @@
+"""Faults injected into real `wmdist train` processes (real local Ray, real redis-server).
+
+Each run is started in a session of its own, as a terminal would start it, so a SIGINT sent
+to its process group is exactly a Ctrl-C: the driver, its redis-server and Ray all get it.
+"""
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import pytest
+
+from wmdist.runtime.checkpoint import latest_checkpoint, load_counters
+
+FAKE = str(Path(__file__).parent / "fake.yaml")
+ROOT = Path(__file__).resolve().parents[2]
+
+
+class Train:
+    """`wmdist train ...` in a new session, its output collected on a thread."""
+
+    def __init__(self, *args: str) -> None:
+        self.proc = subprocess.Popen([sys.executable, "-m", "wmdist.cli", "train", *args], cwd=ROOT,
+                                     stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                                     start_new_session=True)
+        self.lines: list[str] = []
+        self.reader = threading.Thread(target=self._read, daemon=True)
+        self.reader.start()
+
+    def _read(self) -> None:
+        assert self.proc.stdout is not None
+        for line in self.proc.stdout:
+            self.lines.append(line.rstrip("\n"))
+
+    @property
+    def text(self) -> str:
+        return "\n".join(self.lines)
+
+    def wait_for(self, what, timeout: float = 120.0, label: str = ""):
+        """Poll `what()` until it returns something truthy."""
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            got = what()
+            if got:
+                return got
+            if self.proc.poll() is not None:
+                time.sleep(0.5)  # let the reader catch up before the last look
+                got = what()
+                if got:
+                    return got
+                pytest.fail(f"exited {self.proc.returncode} while waiting for {label}:\n{self.text}")
+            time.sleep(0.2)
+        pytest.fail(f"timed out waiting for {label}:\n{self.text}")
+
+    def run_dir(self) -> Path:
+        line = self.wait_for(lambda: next((ln for ln in self.lines if ln.startswith("wmdist: run directory ")), None),
+                             label="the run directory")
+        return Path(line.split("wmdist: run directory ", 1)[1].strip())
+
+    def ctrl_c(self, timeout: float = 120.0) -> int:
+        os.killpg(self.proc.pid, signal.SIGINT)
+        rc = self.proc.wait(timeout)
+        self.reader.join(5)
+        return rc
+
+    def kill(self) -> None:
+        self.proc.kill()
+        self.proc.wait(30)
+        self.reader.join(5)
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    return Path(f"/proc/{pid}").exists() and "Z" not in Path(f"/proc/{pid}/stat").read_text().split()[2]
+
+
+def _redis_pid(run_dir: Path) -> int | None:
+    try:
+        pid = int((run_dir / "redis" / "redis.pid").read_text().strip())
+    except (OSError, ValueError):
+        return None
+    return pid if _alive(pid) else None
+
+
+def _checkpoint_after(run_dir: Path, updates: int):
+    ckpt = latest_checkpoint(run_dir)
+    if ckpt is None:
+        return None
+    c = load_counters(ckpt)
+    return c if c["updates"] > updates else None
+
+
+def _wait_gone(pid: int, timeout: float = 20.0) -> bool:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if not _alive(pid):
+            return True
+        time.sleep(0.1)
+    return False
+
+
+RUN = ["run.max_minutes=10", "checkpoint.every_seconds=2", "run.log_every_seconds=0.5"]
+
+
+@pytest.mark.slow
+def test_redis_run_survives_a_killed_server_a_killed_driver_and_ctrl_c(tmp_path):
+    """redis-server SIGKILLed mid-run: the driver restarts it and the run goes on. The driver
+    SIGKILLed: its redis-server goes too, and --resume continues counters, weights and replay.
+    Ctrl-C: a final checkpoint, exit 130, nothing left running, no traceback."""
+    run = Train(FAKE, "--set", f"run.dir={tmp_path}", "replay.backend=redis", "replay.redis_appendfsync=always",
+                *RUN)
+    try:
+        run_dir = run.run_dir()
+        first = run.wait_for(lambda: _checkpoint_after(run_dir, 0), label="a first checkpoint")
+        old = run.wait_for(lambda: _redis_pid(run_dir), label="redis-server")
+        os.kill(old, signal.SIGKILL)
+        new = run.wait_for(lambda: (p := _redis_pid(run_dir)) and p != old and p, label="redis-server restarted")
+        # the run goes on: checkpoints keep coming, each holding more updates and the replay
+        later = run.wait_for(lambda: _checkpoint_after(run_dir, first["updates"]), label="a checkpoint after it")
+        later = run.wait_for(lambda: _checkpoint_after(run_dir, later["updates"]), label="a second one")
+        assert later["restarts"]["redis"] >= 1
+        run.kill()  # SIGKILL the driver: a crash
+        assert _wait_gone(new), "the driver's redis-server outlived it"
+    finally:
+        if run.proc.poll() is None:
+            run.kill()
+    saved = load_counters(latest_checkpoint(run_dir))
+
+    resumed = Train("--resume", str(run_dir), "--set", *RUN)
+    try:
+        resumed.wait_for(lambda: any("resumed from" in ln for ln in resumed.lines), label="resume")
+        line = next(ln for ln in resumed.lines if "resumed from" in ln)
+        assert f"at {saved['env_steps']} env steps, {saved['updates']} updates" in line
+        resumed.wait_for(lambda: _checkpoint_after(run_dir, saved["updates"]), label="a checkpoint after resume")
+        server = _redis_pid(run_dir)
+        rc = resumed.ctrl_c()
+    finally:
+        if resumed.proc.poll() is None:
+            resumed.kill()
+    assert rc == 130, resumed.text
+    assert "Traceback" not in resumed.text and "checkpoint written" in resumed.text
+    final = load_counters(latest_checkpoint(run_dir))
+    assert final["updates"] > saved["updates"] and final["env_steps"] >= saved["env_steps"]
+    assert final["version"] >= saved["version"]
+    assert server is not None and _wait_gone(server), "redis-server left running after Ctrl-C"
+    limiter = json.loads((latest_checkpoint(run_dir) / "replay" / "limiter.json").read_text())
+    assert limiter, "the final checkpoint holds no replay state"
+
+
+@pytest.mark.slow
+def test_ctrl_c_on_the_memory_backend_checkpoints_and_exits_130(tmp_path):
+    run = Train(FAKE, "--set", f"run.dir={tmp_path}", *RUN)
+    try:
+        run_dir = run.run_dir()
+        run.wait_for(lambda: _checkpoint_after(run_dir, 0), label="a first checkpoint")
+        before = load_counters(latest_checkpoint(run_dir))
+        time.sleep(1.0)
+        rc = run.ctrl_c()
+    finally:
+        if run.proc.poll() is None:
+            run.kill()
+    assert rc == 130, run.text
+    assert "Traceback" not in run.text
+    final = load_counters(latest_checkpoint(run_dir))
+    assert final["updates"] >= before["updates"]
+    assert (latest_checkpoint(run_dir) / "replay").is_dir()
+    assert f"wmdist train --resume {run_dir}" in run.text

@@ -1,0 +1,55 @@
+"""How the driver reads a failed call: a dead process, a constructor that raised, or a
+replay store that is briefly unreachable (a redis-server restarting), and one line for each.
+
+Remote errors arrive wrapped (`RayTaskError(ConnectionError)`, tracebacks as text), so the
+classes are matched by name along the error's MRO and its cause chain.
+"""
+from __future__ import annotations
+
+# Actor errors that mean "the process died" (Ray restarts collectors and reanalyzers).
+ACTOR_DIED = ("RayActorError", "ActorDiedError", "ActorUnavailableError")
+# redis-py errors that a restarted or reconnecting server clears: worth retrying.
+TRANSIENT = ("ConnectionError", "TimeoutError", "BusyLoadingError", "ConnectionRefusedError",
+             "ConnectionResetError", "BrokenPipeError")
+
+
+def _names(err: BaseException) -> set[str]:
+    out: set[str] = set()
+    seen: set[int] = set()
+    e: BaseException | None = err
+    while e is not None and id(e) not in seen:
+        seen.add(id(e))
+        out.update(t.__name__ for t in type(e).__mro__)
+        cause = getattr(e, "cause", None)  # RayTaskError keeps the remote exception here
+        e = cause if isinstance(cause, BaseException) else (e.__cause__ or e.__context__)
+    return out
+
+
+def died(err: BaseException) -> bool:
+    """The called actor's own process died (not one it called in turn)."""
+    return any(t.__name__ in ACTOR_DIED for t in type(err).__mro__)
+
+
+def failed_to_start(err: BaseException) -> bool:
+    """The actor's constructor raised (Ray reports it as a death in the creation task)."""
+    return died(err) and "creation task" in str(err)
+
+
+def transient(err: BaseException) -> bool:
+    """The replay store could not be reached (retry once it is back); never a dead actor."""
+    return not died(err) and bool(_names(err) & set(TRANSIENT))
+
+
+def root_cause(err: BaseException) -> str:
+    """The last 'SomeError: message' line of a remote traceback, else the last line."""
+    lines = [ln.strip() for ln in str(err).splitlines() if ln.strip()]
+    for ln in reversed(lines):
+        head = ln.split(":", 1)[0]
+        if head.isidentifier() and (head.endswith("Error") or head.endswith("Exception")):
+            return ln[:400]
+    return lines[-1][:400] if lines else type(err).__name__
+
+
+def one_line(err: BaseException) -> str:
+    text = str(err).strip().splitlines()
+    return f"{type(err).__name__}: {text[-1] if text else ''}"[:400]

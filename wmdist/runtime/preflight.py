@@ -1,0 +1,152 @@
+"""Every check `wmdist train` can make before Ray starts or a run directory exists.
+
+Each failure is one `ConfigError` line (exit status 2) and leaves nothing behind: the env
+builds, the algorithm builds, the roles fit the embedded instance, the replay store is
+reachable with its password, the metrics port is free (it is bound here, and kept), the run
+directory can be created, and a checkpoint to resume loads into the model the config
+describes.
+"""
+from __future__ import annotations
+
+import os
+import shutil
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from wmdist.config.errors import ConfigError
+from wmdist.config.schema import RunConfig
+from wmdist.envs.spec import EnvSpec
+
+REDIS_CHECK_TIMEOUT = 3.0  # seconds to reach an external redis before calling it unreachable
+
+
+@dataclass
+class Checked:
+    """What the checks built and the run keeps using."""
+
+    spec: EnvSpec
+    fields: dict
+    hub: Any = None  # a started MetricsHub, or None when metrics are off
+
+
+def check_env_and_algo(cfg: RunConfig) -> tuple[EnvSpec, Any]:
+    from wmdist.runtime.roles import build_algorithm
+    from wmdist.runtime.train import env_spec_or_error
+
+    spec = env_spec_or_error(cfg)
+    try:
+        algo = build_algorithm(cfg, spec, cfg.run.seed)
+    except (ValueError, TypeError) as err:
+        raise ConfigError(_first_line(err)) from None
+    return spec, algo
+
+
+def check_resources(cfg: RunConfig) -> None:
+    """An embedded instance's size is known before it starts: check the roles fit it now."""
+    from wmdist.runtime.resources import check_fits
+
+    if cfg.ray.address:
+        return  # a cluster's size is known only once joined (checked in topology.build)
+    cluster = {"CPU": float(cfg.ray.num_cpus or os.cpu_count() or 1), "GPU": float(_gpus(cfg))}
+    check_fits(cfg, cluster)
+
+
+def _gpus(cfg: RunConfig) -> int:
+    if cfg.ray.num_gpus >= 0:
+        return cfg.ray.num_gpus
+    import torch
+
+    return torch.cuda.device_count() if torch.cuda.is_available() else 0
+
+
+def check_replay_store(cfg: RunConfig) -> None:
+    """redis: the private server can be started, or the external one answers our password."""
+    r = cfg.replay
+    if r.backend != "redis":
+        return
+    if not r.redis_url:
+        if shutil.which("redis-server") is None:
+            raise ConfigError("replay.backend=redis needs redis-server (apt-get install redis-server, "
+                              "or `make system-deps`)")
+        return
+    import redis
+
+    from wmdist.replay.storage_redis import connect
+
+    if r.redis_password_file and not os.path.isfile(r.redis_password_file):
+        raise ConfigError(f"replay.redis_password_file: no such file {r.redis_password_file!r}")
+    try:
+        client = connect(r.redis_url, r.redis_password_file)
+    except ValueError as err:  # scheme or URL syntax
+        raise ConfigError(_first_line(err)) from None
+    except OSError as err:
+        raise ConfigError(f"replay.redis_password_file {r.redis_password_file!r}: {err.strerror}") from None
+    client.connection_pool.connection_kwargs.update(socket_timeout=REDIS_CHECK_TIMEOUT,
+                                                    socket_connect_timeout=REDIS_CHECK_TIMEOUT)
+    try:
+        client.ping()
+    except (redis.AuthenticationError, redis.ResponseError) as err:
+        if not isinstance(err, redis.AuthenticationError) and "AUTH" not in str(err).upper():
+            raise ConfigError(f"replay.redis_url {r.redis_url}: {_first_line(err)}") from None
+        if client.connection_pool.connection_kwargs.get("password") is None:
+            raise ConfigError(f"replay.redis_url {r.redis_url}: the server wants a password "
+                              f"(set replay.redis_password_file)") from None
+        raise ConfigError(f"replay.redis_url {r.redis_url}: the password was refused "
+                          f"(check replay.redis_password_file)") from None
+    except (redis.ConnectionError, redis.TimeoutError) as err:
+        raise ConfigError(f"replay.redis_url {r.redis_url}: nothing answers there ({_first_line(err)})") from None
+    finally:
+        client.close()
+
+
+def start_metrics(cfg: RunConfig):
+    """Bind the exporter now, so a busy port fails before anything starts (kept for the run)."""
+    if not cfg.metrics.enabled:
+        return None
+    from wmdist.metrics import MetricsHub
+
+    hub = MetricsHub(host=cfg.metrics.host, port=cfg.metrics.port)
+    try:
+        hub.start()
+    except OSError as err:
+        raise ConfigError(f"metrics.port {cfg.metrics.port} on {cfg.metrics.host} cannot be used "
+                          f"({err.strerror or err}); pick another port, or 0 for a free one") from None
+    return hub
+
+
+def make_run_dir(cfg: RunConfig) -> Path:
+    from wmdist.runtime.train import new_run_dir
+
+    try:
+        return new_run_dir(cfg)
+    except OSError as err:
+        raise ConfigError(f"run.dir {cfg.run.dir!r}: cannot create the run directory "
+                          f"({err.strerror or err})") from None
+
+
+def check_checkpoint(run_dir: Path, ckpt: Path, cfg: RunConfig, algo: Any) -> dict:
+    """The checkpoint's learner state, loaded into a learner built from `cfg` (so a checkpoint
+    of another algorithm, or overrides that change the model's shape, fail here in one line)."""
+    from wmdist.runtime import checkpoint as ck
+    from wmdist.runtime.train import load_run_config
+
+    saved = load_run_config(run_dir)
+    if saved.algo_name != cfg.algo_name:
+        raise ConfigError(f"{ckpt} was trained by {saved.algo_name!r}; algo.name={cfg.algo_name!r} cannot resume it")
+    try:
+        state = ck.load_learner_state(ckpt)
+        ck.load_counters(ckpt)
+    except Exception as err:  # noqa: BLE001 - unreadable or crafted files: one line
+        raise ConfigError(f"{ckpt} cannot be read ({_first_line(err)})") from None
+    try:
+        algo.make_learner("cpu").load_state_dict(state["learner"])
+    except Exception as err:  # noqa: BLE001 - size mismatch, missing keys, another algorithm
+        raise ConfigError(f"{ckpt} does not fit the model this config builds ({_first_line(err)}); "
+                          f"overrides that change the model's shape cannot resume a run") from None
+    return state
+
+
+def _first_line(err: BaseException) -> str:
+    lines = [ln.strip() for ln in str(err).strip().splitlines() if ln.strip()]
+    return (lines[0] if lines else type(err).__name__)[:300]
