@@ -9,7 +9,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from wmdist.algos.base import Algorithm, FieldSpec, Learner, Policy, Reanalyzer, UpdateResult
+from wmdist.algos.base import REANALYZE, Algorithm, FieldSpec, Learner, Policy, Reanalyzer, UpdateResult
 from wmdist.config.fields import param
 from wmdist.nets.optim import GuardedStep, OptimConfig
 
@@ -102,6 +102,7 @@ class FakeReanalyzer(Reanalyzer):
 class FakeAlgo(Algorithm):
     name = "fake"
     Config = FakeConfig
+    capabilities = frozenset({REANALYZE})
 
     def validate(self) -> None:
         if not self.spec.discrete:

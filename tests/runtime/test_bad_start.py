@@ -46,12 +46,10 @@ def test_busy_metrics_port_fails_before_anything_starts(tmp_path, capsys, busy_p
 
 
 def test_more_cpus_than_the_machine_fails_before_ray_starts(tmp_path, capsys):
-    import ray
-
     line = _one_line_exit_2(capsys, ["train", FAKE, "--set", f"run.dir={tmp_path}", "actors.num=64",
                                      "actors.cpus=1"])
     assert "CPU" in line and "actors.num" in line
-    assert not ray.is_initialized() and not any(tmp_path.iterdir())
+    assert not any(tmp_path.iterdir())
 
 
 def test_uncreatable_run_dir_is_one_line(tmp_path, capsys):

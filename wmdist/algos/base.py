@@ -23,19 +23,33 @@ Batches handed to `Learner.update` / `Reanalyzer.reanalyze` are dicts of numpy a
 shaped `[B, T, ...]` (every stored field) plus `mask [B, T]` (1 where a real step is) and
 `is_weight [B]` (importance weights, 1 for uniform sampling). Keys and stamps stay with
 the runtime.
+
+What an algorithm can do beyond that interface it declares as capabilities
+(`Algorithm.capabilities`, the constants below); the runtime and the CLI ask
+`algo.offers(CAPABILITY)` where they need one, never `algo.name`.
 """
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
-from typing import Any, ClassVar, Mapping
+from typing import TYPE_CHECKING, Any, ClassVar, Mapping
 
 import numpy as np
 
 from wmdist.envs.spec import EnvSpec
 
+if TYPE_CHECKING:
+    from wmdist.envs.env import Env
+
 Weights = dict[str, np.ndarray]  # a flat state dict as numpy arrays (cheap ray.put, no pickle)
 Batch = dict[str, np.ndarray]  # field -> [B, T, ...], plus mask [B, T] and is_weight [B]
+
+# Capabilities an Algorithm may declare in `capabilities` (a frozenset of these strings).
+PREDICTS_OBSERVATIONS = "predicts_observations"  # decodes imagined observations: `dream_video` (`wmdist dream`)
+TWO_PLAYER = "two_player"  # plays two-player games (acts for `to_play`, honours legal-action masks)
+REANALYZE = "reanalyze"  # has a reanalyze step: `make_reanalyzer` returns a Reanalyzer
+PLANS = "plans"  # searches or plans at decision time (e.g. MCTS), not only a policy network
+CAPABILITIES: frozenset[str] = frozenset({PREDICTS_OBSERVATIONS, TWO_PLAYER, REANALYZE, PLANS})
 
 
 @dataclass(frozen=True)
@@ -120,11 +134,20 @@ class Algorithm(ABC):
     """Factory for an algorithm's parts; built in every process from (spec, config).
 
     Subclasses set `name` and `Config` (a dataclass of hyperparameters declared with
-    `wmdist.config.fields.param`; it is the `algo` section of the run config).
+    `wmdist.config.fields.param`; it is the `algo` section of the run config), and
+    `capabilities`: which of `CAPABILITIES` they offer (none by default).
     """
 
     name: ClassVar[str]
     Config: ClassVar[type]
+    capabilities: ClassVar[frozenset[str]] = frozenset()
+
+    @classmethod
+    def offers(cls, capability: str) -> bool:
+        """Whether this algorithm declares `capability` (one of `CAPABILITIES`)."""
+        if capability not in CAPABILITIES:
+            raise ValueError(f"unknown capability {capability!r}; known: {', '.join(sorted(CAPABILITIES))}")
+        return capability in cls.capabilities
 
     def __init__(self, spec: EnvSpec, config: Any, seed: int = 0) -> None:
         self.spec = spec
@@ -150,6 +173,12 @@ class Algorithm(ABC):
     def make_reanalyzer(self, device: str = "cpu") -> Reanalyzer | None:
         """None if the algorithm has no reanalyze step."""
         return None
+
+    def dream_video(self, weights: Weights, env: Env, path: str, context: int = 5, horizon: int = 45) -> str:
+        """Write a GIF of the world model's open-loop prediction beside the real observations
+        (`context` filtered steps, then `horizon` imagined ones) to `path` and return the path.
+        Only for algorithms that offer PREDICTS_OBSERVATIONS."""
+        raise NotImplementedError(f"{type(self).__name__} does not predict observations")
 
     def step_fields(self) -> dict[str, FieldSpec]:
         """Every per-step field of a stored sequence."""

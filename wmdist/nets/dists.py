@@ -1,4 +1,4 @@
-"""Distributions and transforms used by world models (DreamerV3 numbers in REFERENCE.md).
+"""Distributions and transforms used by world models (DreamerV3 numbers in docs/reference.md).
 
 symlog/symexp squash targets of unknown scale; two-hot spreads a scalar over two adjacent
 bins of a fixed support; categorical latents are sampled as one-hots with straight-through

@@ -32,6 +32,9 @@ class ReplayConfig:
         "everysec", "private redis-server AOF fsync policy", choices=("always", "everysec", "no"))
     redis_aof: bool = param(True, "private redis-server keeps an append-only file (durable across restarts)")
     shard_cpus: float = param(0.1, "Ray CPU share of each shard actor", gt=0)
+    resources: dict = param(
+        {}, "custom Ray resources of each shard actor and of the limiter, e.g. {replay: 1} to keep replay on the "
+            "head node (deploy/ray/*.yaml give the head a `replay` resource)")
     max_policy_lag: int = param(
         0, "drop inserted sequences older than this many policy versions (0 = off)", ge=0)
     seed: int = param(0, "seed of the samplers (shard i uses seed + i)", ge=0)

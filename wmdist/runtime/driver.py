@@ -201,6 +201,7 @@ class Driver:
         try:
             if self.topo.replay.revive_server():
                 self.c.restarts["redis"] = self.c.restarts.get("redis", 0) + 1
+                log.warning("the private redis-server died; restarted at %s from its AOF", self.topo.replay.server_url)
         except Exception as err:  # noqa: BLE001 - it will not come back: the outage clock decides
             self._replay_outage(err)
 

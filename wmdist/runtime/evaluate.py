@@ -9,6 +9,7 @@ from typing import IO, Callable
 
 import numpy as np
 
+from wmdist.algos.base import PREDICTS_OBSERVATIONS
 from wmdist.config.errors import ConfigError
 from wmdist.runtime import checkpoint as ck
 from wmdist.runtime.board_eval import default_opponent, greedy_action, play_games
@@ -42,7 +43,8 @@ def _human(env, out: IO[str]) -> Callable[[object], int]:
 
 
 def evaluate_run(run_dir: str, episodes: int = 10, video: str | None = None, human: bool = False,
-                 out: IO[str] = sys.stdout) -> int:
+                 out: IO[str] | None = None) -> int:
+    out = out or sys.stdout  # looked up per call: a default bound at import outlives a redirected stdout
     cfg, spec, algo, version, weights, ckpt = load_run(run_dir)
     policy = algo.make_policy("cpu")
     policy.set_weights(weights, version)
@@ -94,17 +96,18 @@ def record_video(cfg, algo, weights, version: int, path: str, max_steps: int = 1
     return path
 
 
-def dream_run(run_dir: str, out: str | None = None, horizon: int = 45, stream: IO[str] = sys.stdout) -> int:
+def dream_run(run_dir: str, out: str | None = None, horizon: int = 45, stream: IO[str] | None = None) -> int:
+    stream = stream or sys.stdout
     cfg, spec, algo, version, weights, ckpt = load_run(run_dir)
-    try:
-        from wmdist.algos.dreamer.dream import open_loop_video
-    except ImportError as err:
-        raise ConfigError(f"dream needs the Dreamer package: {err}") from None
-    if cfg.algo_name != "dreamer":
-        raise ConfigError(f"dream shows a Dreamer world model; {run_dir} trained {cfg.algo_name!r}")
+    if not algo.offers(PREDICTS_OBSERVATIONS):
+        raise ConfigError(f"dream needs an algorithm that predicts observations; {run_dir} trained {cfg.algo_name!r}")
     from wmdist.envs.factory import make_env
 
     path = out or str(Path(run_dir) / "dream.gif")
     env = make_env(cfg.env, cfg.run.seed + 17)
-    print(f"wmdist: dream video {open_loop_video(algo, weights, env, path, context=5, horizon=horizon)}", file=stream)
+    try:
+        video = algo.dream_video(weights, env, path, context=5, horizon=horizon)
+    except ImportError as err:
+        raise ConfigError(f"dream cannot write the video: {err}") from None
+    print(f"wmdist: dream video {video}", file=stream)
     return 0

@@ -461,11 +461,12 @@ def create_replay(cfg: ReplayConfig, fields: dict[str, FieldSpec], run_dir: str,
                                  die_with_parent=threading.current_thread() is threading.main_thread()).start()
             url, pwfile = server.url, server.password_file
     namespaces = [f"wmdist:{run_name}:s{i}" for i in range(cfg.shards)]
+    placement = {"resources": dict(cfg.resources)} if cfg.resources else {}
     shard_cls = ray.remote(ShardActor).options(num_cpus=cfg.shard_cpus, max_concurrency=8, max_restarts=-1,
-                                               max_task_retries=3)
+                                               max_task_retries=3, **placement)
     shards = [shard_cls.remote(fields, cfg.seq_len, cap, cfg.sampler, cfg.priority_alpha, i, cfg.seed + i,
                                cfg.backend, url, pwfile, namespaces[i]) for i in range(cfg.shards)]
-    limiter = ray.remote(LimiterActor).options(num_cpus=0, max_concurrency=64).remote(
+    limiter = ray.remote(LimiterActor).options(num_cpus=0, max_concurrency=64, **placement).remote(
         cfg.samples_per_insert, cfg.min_size, cfg.error_buffer)
     try:
         sizes = ray.get([s.mass.remote() for s in shards])  # also waits for redis shards to rebuild

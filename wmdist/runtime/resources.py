@@ -36,7 +36,8 @@ def roles(cfg: RunConfig) -> dict[str, tuple[RoleResources, int]]:
     out = {
         "collector": (RoleResources(cfg.actors.cpus, cfg.actors.gpus, cfg.actors.resources), cfg.actors.num),
         "learner": (RoleResources(cfg.learner.cpus, cfg.learner.gpus, cfg.learner.resources), 1),
-        "replay": (RoleResources(cfg.replay.shard_cpus), cfg.replay.shards),
+        "replay": (RoleResources(cfg.replay.shard_cpus, custom=cfg.replay.resources), cfg.replay.shards),
+        "limiter": (RoleResources(0.0, custom=cfg.replay.resources), 1),
         "reanalyzer": (RoleResources(cfg.reanalyze.cpus, cfg.reanalyze.gpus, cfg.reanalyze.resources), cfg.reanalyze.num),
     }
     if cfg.eval.every_seconds > 0:

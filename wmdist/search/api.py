@@ -51,7 +51,7 @@ RecurrentFn = Callable[..., tuple[np.ndarray, np.ndarray, np.ndarray, Latents]]
 
 @dataclass
 class SearchConfig:
-    """Hyperparameters of one search (defaults: MuZero Atari, REFERENCE.md)."""
+    """Hyperparameters of one search (defaults: MuZero Atari, docs/reference.md)."""
 
     num_simulations: int = param(50, "simulations per search (one recurrent_fn call each)", ge=1)
     c1: float = param(1.25, "pUCT exploration constant c1 (MuZero eq. 2)", gt=0)

@@ -1,16 +1,18 @@
 """Dreamer V1/V2/V3 as one `Algorithm` (the version is configuration)."""
 from __future__ import annotations
 
-from wmdist.algos.base import Algorithm, FieldSpec
+from wmdist.algos.base import PREDICTS_OBSERVATIONS, Algorithm, FieldSpec, Weights
 from wmdist.algos.dreamer.config import DreamerConfig
 from wmdist.algos.dreamer.learner import DreamerLearner
 from wmdist.algos.dreamer.policy import DreamerPolicy
+from wmdist.envs.env import Env
 from wmdist.envs.spec import EnvSpec
 
 
 class Dreamer(Algorithm):
     name = "dreamer"
     Config = DreamerConfig
+    capabilities = frozenset({PREDICTS_OBSERVATIONS})  # the decoder turns imagined latents into observations
 
     def __init__(self, spec: EnvSpec, config: DreamerConfig | None = None, seed: int = 0) -> None:
         super().__init__(spec, config if config is not None else DreamerConfig(), seed)
@@ -36,3 +38,8 @@ class Dreamer(Algorithm):
 
     def make_learner(self, device: str = "cpu") -> DreamerLearner:
         return DreamerLearner(self.cfg, self.spec, device, self.seed)
+
+    def dream_video(self, weights: Weights, env: Env, path: str, context: int = 5, horizon: int = 45) -> str:
+        from wmdist.algos.dreamer.dream import open_loop_video  # imageio only when a video is made
+
+        return open_loop_video(self, weights, env, path, context=context, horizon=horizon)

@@ -1,7 +1,7 @@
 """Dreamer configuration: one `version` (1, 2, 3) whose paper numbers fill any field left at None.
 
 A preset may set every field explicitly so it reads as the paper's table; a field left at
-None takes `VERSION_DEFAULTS[version]` (REFERENCE.md; V1/V2 DMC numbers, V3 arXiv v1).
+None takes `VERSION_DEFAULTS[version]` (docs/reference.md; V1/V2 DMC numbers, V3 arXiv v1).
 `resolved()` returns the config with every None replaced.
 """
 from __future__ import annotations

@@ -1,7 +1,7 @@
 """MuZero (Schrittwieser et al., 2020) and MuZero Reanalyze behind the wmdist Algorithm interface."""
 from __future__ import annotations
 
-from wmdist.algos.base import Algorithm, FieldSpec
+from wmdist.algos.base import PLANS, REANALYZE, TWO_PLAYER, Algorithm, FieldSpec
 from wmdist.algos.muzero.build import build_net, check_spec
 from wmdist.algos.muzero.config import MuZeroConfig
 from wmdist.algos.muzero.learner import MuZeroLearner
@@ -15,6 +15,8 @@ class MuZero(Algorithm):
 
     name = "muzero"
     Config = MuZeroConfig
+    # acts by MCTS; Reanalyze reruns that search on stored data; board games search for `to_play`
+    capabilities = frozenset({PLANS, REANALYZE, TWO_PLAYER})
 
     def __init__(self, spec, config: MuZeroConfig | None = None, seed: int = 0) -> None:
         super().__init__(spec, config if config is not None else MuZeroConfig(), seed)
