@@ -64,13 +64,13 @@ def _parser() -> argparse.ArgumentParser:
     v.add_argument("--video", default=None, metavar="PATH.gif", help="record the first episode")
     v.add_argument("--human", action="store_true", help="board games: play against the agent at the terminal")
 
-    d = sub.add_parser("dream", help="Dreamer: open-loop prediction video of a run's world model",
+    d = sub.add_parser("dream", help="open-loop prediction video of a world model that predicts observations",
                        description="Real frames beside the model's: 5 observed steps, then imagined.")
     d.add_argument("run_dir")
     d.add_argument("--out", default=None, help="output GIF (default RUN_DIR/dream.gif)")
     d.add_argument("--horizon", type=int, default=45)
 
-    b = sub.add_parser("bench", help="run a benchmark (mcts, replay, selfplay, dreamer, all)",
+    b = sub.add_parser("bench", help="run a benchmark (mcts, replay, selfplay, dreamer, envs, all; soak by name)",
                        description="Each measured case prints one JSON object per line with --json.")
     b.add_argument("name")
     b.add_argument("--json", action="store_true", help="one JSON object per line (default: a table)")

@@ -38,23 +38,28 @@ class _Counting(Driver):
 def main() -> None:
     cluster = Cluster(initialize_head=True, head_node_args={"num_cpus": 1, "include_dashboard": False,
                                                             "resources": {"head": 8}})
-    doomed = cluster.add_node(num_cpus=1, resources={"collector_node": 4})
-    spare = cluster.add_node(num_cpus=1, resources={"collector_node": 4})
+    workers = [cluster.add_node(num_cpus=1, resources={"collector_node": 4}) for _ in range(2)]
+    t0 = time.monotonic()
     ray.init(address=cluster.address, log_to_driver=False)
     tmp = Path(tempfile.mkdtemp())
     cfg = load_config(FAKE, [f"run.dir={tmp}", "run.max_minutes=3", "actors.num=2",
-                             "actors.resources={collector_node: 2}", "replay.resources={head: 1}",
+                             "actors.resources={collector_node: 1}", "replay.resources={head: 1}",
                              "learner.resources={head: 1}", "replay.shards=1"])
     spec = env_spec_or_error(cfg)
     topo = build(cfg, spec, tmp, build_algorithm(cfg, spec, 0).step_fields())
     try:
-        before = ray.get([c.node_id.remote() for c in topo.collectors])  # one per worker (2 units each)
+        before = ray.get([c.node_id.remote() for c in topo.collectors])
+        doomed = next(w for w in workers if w.node_id == before[0])  # the node of collector 0 goes away
+        spare = next(w for w in workers if w is not doomed)
+        print(f"actors up {time.monotonic() - t0:.1f}s", file=sys.stderr, flush=True)
         driver = _Counting(topo, Counters())
 
         def remove_worker() -> None:
             while driver.c.env_steps < 400 and driver.elapsed() < 120:
                 time.sleep(0.2)
+            print(f"removing {time.monotonic() - t0:.1f}s", file=sys.stderr, flush=True)
             cluster.remove_node(doomed)
+            print(f"removed {time.monotonic() - t0:.1f}s", file=sys.stderr, flush=True)
             # then run until both collectors answered from the spare node
             deadline = time.monotonic() + 120
             while time.monotonic() < deadline:
@@ -65,6 +70,7 @@ def main() -> None:
                     continue
                 if set(nodes) == {spare.node_id} and driver.c.restarts["collector"] >= 1:
                     break
+            print(f"back {time.monotonic() - t0:.1f}s", file=sys.stderr, flush=True)
             time.sleep(3.0)  # a few more segments on the spare node
             driver.request_stop("node-loss test done")
 

@@ -9,13 +9,15 @@ from typing import IO
 from wmdist.config.errors import ConfigError, closest
 
 BENCHES = ("mcts", "replay", "selfplay", "dreamer", "envs")
+LONG = ("soak",)  # run by name only: not part of `all`
 
 
 def run_bench(name: str, as_json: bool = False, quick: bool = False, out: IO[str] = sys.stdout) -> int:
     names = BENCHES if name == "all" else (name,)
     for n in names:
-        if n not in BENCHES:
-            raise ConfigError(f"unknown benchmark {n!r}{closest(n, BENCHES)}; known: {', '.join(BENCHES)}, all")
+        if n not in BENCHES + LONG:
+            known = BENCHES + LONG
+            raise ConfigError(f"unknown benchmark {n!r}{closest(n, known)}; known: {', '.join(known)}, all")
         module = importlib.import_module(f"wmdist.bench.{n}")
         for case in module.run(quick=quick):
             case = {"bench": n, **case}

@@ -99,7 +99,11 @@ def build(cfg: RunConfig, spec: EnvSpec, run_dir: Path, fields: dict) -> Topolog
     check_fits(cfg, ray.cluster_resources())
     res = roles(cfg)
     replay = create_replay(cfg.replay, fields, str(run_dir), cfg.run.name)
-    broker = ray.remote(WeightBroker).options(num_cpus=BROKER_CPUS).remote()
+    # the broker lives on the driver's node: losing any other node must not lose the weights' route
+    from ray.util.scheduling_strategies import NodeAffinitySchedulingStrategy
+
+    here = NodeAffinitySchedulingStrategy(ray.get_runtime_context().get_node_id(), soft=False)
+    broker = ray.remote(WeightBroker).options(num_cpus=BROKER_CPUS, scheduling_strategy=here).remote()
     lres = res["learner"][0]
     learner = ray.remote(LearnerRole).options(**lres.options(), max_restarts=0, max_concurrency=1).remote(
         cfg, spec, replay, broker, lres.threads)

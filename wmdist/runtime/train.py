@@ -147,7 +147,6 @@ def train(cfg: RunConfig | None = None, resume: str | None = None, overrides: li
     handler = _file_log(run_dir)
     log.info("start%s: %s", f" (resume from {ckpt.name})" if ckpt else "", " ".join(sys.argv))
     print(f"wmdist: run directory {run_dir}", file=out, flush=True)
-    _stop_on_sigterm()
     try:
         return _run(cfg, spec, fields, run_dir, ckpt, state, hub, out)
     finally:
@@ -169,6 +168,7 @@ def _run(cfg: RunConfig, spec, fields: dict, run_dir: Path, ckpt: Path | None, s
     phase = "starting Ray"
     try:
         start_ray(cfg)
+        _stop_on_sigterm()  # after Ray, whose driver installs a SIGTERM handler of its own that aborts
         phase = "starting the actors"
         topo = build(cfg, spec, run_dir, fields)
         counters = Counters()

@@ -1,0 +1,107 @@
+"""Soak benchmark: train with faults injected at random, then check the replay's accounting.
+
+    wmdist bench soak --json                 # 30 minutes, a fault every 2-5 minutes
+    wmdist bench soak --json --quick         # 3 minutes, a fault every 20-60 seconds
+
+Runs `configs/muzero_reanalyze_cartpole.yaml` (a collector, a learner, a reanalyzer) on an
+embedded local Ray with the redis backend (`appendfsync always`). A fault thread kills, in
+random order, the collector's process, the reanalyzer's process or the private
+redis-server (SIGKILL); the driver and Ray bring each back. At the end every sequence a
+collector saw acknowledged must be in replay or counted as evicted, and the train ratio
+(sampled / inserted sequences) is compared with `replay.samples_per_insert`. Not part of
+`wmdist bench all` (it is long): one JSON line per fault, and one summary line.
+"""
+from __future__ import annotations
+
+import os
+import random
+import signal
+import tempfile
+import threading
+import time
+from pathlib import Path
+from typing import Iterator
+
+CONFIG = str(Path(__file__).resolve().parents[2] / "configs" / "muzero_reanalyze_cartpole.yaml")
+WARMUP_SHARE = 0.1  # the ratio is judged after this share of the run (the limiter's min_size fill)
+
+
+def run(quick: bool = False, minutes: float | None = None, config: str = CONFIG, seed: int = 0) -> Iterator[dict]:
+    import ray
+
+    from wmdist.config.loader import load_config
+    from wmdist.runtime.driver import Counters, Driver
+    from wmdist.runtime.preflight import check_env_and_algo
+    from wmdist.runtime.topology import build, start_ray
+
+    minutes = minutes or (3.0 if quick else 30.0)
+    gap = (20.0, 60.0) if quick else (120.0, 300.0)  # seconds between faults
+    tmp = Path(tempfile.mkdtemp(prefix="wmdist-soak-"))
+    cfg = load_config(config, [f"run.dir={tmp}", f"run.max_minutes={minutes}", "run.max_env_steps=0",
+                               "replay.backend=redis", "replay.redis_appendfsync=always", "metrics.enabled=false",
+                               "checkpoint.every_seconds=0", "eval.every_seconds=0"])
+    spec, algo = check_env_and_algo(cfg)
+    start_ray(cfg)
+    topo = build(cfg, spec, tmp, algo.step_fields())
+    events: list[dict] = []
+    ratios: list[tuple[float, float]] = []  # (elapsed, sampled / inserted)
+
+    class Counting(Driver):
+        acked = 0  # sequences collectors were told replay stored
+
+        def _handle(self, kind, i, res):
+            if kind == "collector":
+                self.acked += int(res.get("inserted", 0))
+            super()._handle(kind, i, res)
+
+        def tick(self, force_plot: bool = False) -> dict:
+            snap = super().tick(force_plot)
+            r = snap.get("replay") or {}
+            if r.get("limiter_inserted"):
+                ratios.append((self.elapsed(), r["limiter_sampled"] / r["limiter_inserted"]))
+            return snap
+
+    driver = Counting(topo, Counters())
+    rng = random.Random(seed)
+    stop = threading.Event()
+
+    def inject() -> None:
+        kinds = ["collector", "reanalyzer", "redis"]
+        while not stop.wait(rng.uniform(*gap)):
+            kind = rng.choice(kinds)
+            try:
+                if kind == "redis":
+                    os.kill(topo.replay._server.proc.pid, signal.SIGKILL)
+                else:
+                    ray.kill((topo.collectors if kind == "collector" else topo.reanalyzers)[0], no_restart=False)
+            except Exception as err:  # noqa: BLE001 - report and go on
+                events.append({"t": round(driver.elapsed(), 1), "fault": kind, "error": str(err)[:200]})
+                continue
+            events.append({"t": round(driver.elapsed(), 1), "fault": kind})
+
+    thread = threading.Thread(target=inject, daemon=True)
+    thread.start()
+    try:
+        result = driver.run()
+        stop.set()
+        stats = topo.replay.stats()
+    finally:
+        stop.set()
+        topo.shutdown()
+    for e in events:
+        yield {"case": "fault", **e}
+    target = cfg.replay.samples_per_insert
+    judged = [r for t, r in ratios if t >= WARMUP_SHARE * minutes * 60]
+    stored, evicted, inserts = (int(stats.get(k, 0)) for k in ("size_sequences", "drops_evicted", "inserts"))
+    yield {
+        "case": "summary", "minutes": minutes, "status": result.status, "message": result.message,
+        "faults": {k: sum(1 for e in events if e["fault"] == k and "error" not in e)
+                   for k in ("collector", "reanalyzer", "redis")},
+        "restarts": result.counters.restarts, "env_steps": result.counters.env_steps,
+        "updates": result.counters.updates, "acked": driver.acked, "inserts": inserts, "stored": stored,
+        "evicted": evicted, "unaccounted": inserts - stored - evicted,
+        "acked_all_accounted": driver.acked <= stored + evicted,
+        "train_ratio_target": target, "train_ratio_final": round(ratios[-1][1], 2) if ratios else None,
+        "train_ratio_max_rel_error": round(max(abs(r / target - 1) for r in judged), 4) if judged and target else None,
+        "drops": {k: v for k, v in stats.items() if k.startswith("drops_") and v},
+    }
