@@ -44,7 +44,7 @@ def run(quick: bool = False, minutes: float | None = None, config: str = CONFIG,
     start_ray(cfg)
     topo = build(cfg, spec, tmp, algo.step_fields())
     events: list[dict] = []
-    ratios: list[tuple[float, float]] = []  # (elapsed, sampled / inserted)
+    counts: list[tuple[float, float, float]] = []  # (elapsed, sampled, inserted) sequences, from the limiter
 
     class Counting(Driver):
         acked = 0  # sequences collectors were told replay stored
@@ -58,7 +58,7 @@ def run(quick: bool = False, minutes: float | None = None, config: str = CONFIG,
             snap = super().tick(force_plot)
             r = snap.get("replay") or {}
             if r.get("limiter_inserted"):
-                ratios.append((self.elapsed(), r["limiter_sampled"] / r["limiter_inserted"]))
+                counts.append((self.elapsed(), r["limiter_sampled"], r["limiter_inserted"]))
             return snap
 
     driver = Counting(topo, Counters())
@@ -91,7 +91,7 @@ def run(quick: bool = False, minutes: float | None = None, config: str = CONFIG,
     for e in events:
         yield {"case": "fault", **e}
     target = cfg.replay.samples_per_insert
-    judged = [r for t, r in ratios if t >= WARMUP_SHARE * minutes * 60]
+    ratio, windows = _ratios(counts, WARMUP_SHARE * minutes * 60, window=30.0 if quick else 120.0)
     stored, evicted, inserts = (int(stats.get(k, 0)) for k in ("size_sequences", "drops_evicted", "inserts"))
     yield {
         "case": "summary", "minutes": minutes, "status": result.status, "message": result.message,
@@ -101,7 +101,28 @@ def run(quick: bool = False, minutes: float | None = None, config: str = CONFIG,
         "updates": result.counters.updates, "acked": driver.acked, "inserts": inserts, "stored": stored,
         "evicted": evicted, "unaccounted": inserts - stored - evicted,
         "acked_all_accounted": driver.acked <= stored + evicted,
-        "train_ratio_target": target, "train_ratio_final": round(ratios[-1][1], 2) if ratios else None,
-        "train_ratio_max_rel_error": round(max(abs(r / target - 1) for r in judged), 4) if judged and target else None,
+        "train_ratio_target": target, "train_ratio_after_warmup": ratio and round(ratio, 2),
+        "train_ratio_rel_error": ratio and target and round(ratio / target - 1, 4),
+        "train_ratio_windows": [round(w, 1) for w in windows],
+        "train_ratio_windows_max_rel_error": round(max(abs(w / target - 1) for w in windows), 4)
+        if windows and target else None,
         "drops": {k: v for k, v in stats.items() if k.startswith("drops_") and v},
     }
+
+
+def _ratios(counts: list[tuple[float, float, float]], start: float, window: float) -> tuple[float | None, list[float]]:
+    """Sampled per inserted sequence after `start` seconds (the warm-up fill excluded), overall
+    and in consecutive windows of about `window` seconds."""
+    judged = [c for c in counts if c[0] >= start]
+    if len(judged) < 2:
+        return None, []
+    def ratio(a, b):
+        return (b[1] - a[1]) / (b[2] - a[2]) if b[2] > a[2] else None
+    windows, a = [], judged[0]
+    for b in judged[1:]:
+        if b[0] - a[0] >= window:
+            r = ratio(a, b)
+            if r is not None:
+                windows.append(r)
+            a = b
+    return ratio(judged[0], judged[-1]), windows

@@ -89,11 +89,13 @@ class Collector:
         t0 = time.monotonic()
         stats: dict[str, Any] = {"index": self.index, "env_steps": 0, "episodes": [], "lengths": [],
                                  "inserted": 0, "limiter_blocked": False, **self.tag}
+        held = 0 if self.pending is None else len(self.pending)  # left from a segment the limiter held back
         if not self._flush(self.cfg.actors.insert_timeout):
             stats["limiter_blocked"] = True
             stats["busy_seconds"] = 0.0
             stats["version"] = self.version
             return stats
+        stats["inserted"] = held  # acknowledged by replay now
         self._pull_weights()
         self.policy.set_progress(env_steps, updates)
         E = self.venv.num_envs
@@ -127,7 +129,7 @@ class Collector:
             self.pending = batch if self.pending is None else self.pending.concat(batch)
         n_pending = 0 if self.pending is None else len(self.pending)
         ok = self._flush(self.cfg.actors.insert_timeout)
-        stats["inserted"] = n_pending if ok else 0
+        stats["inserted"] += n_pending if ok else 0
         stats["limiter_blocked"] = not ok
         stats["busy_seconds"] = time.monotonic() - t0
         stats["version"] = self.version
