@@ -36,6 +36,7 @@ REPLAY_OUTAGE_SECONDS = 60.0
 SERVICE_CHECK_SECONDS = 1.0  # how often the driver looks at its private redis-server
 
 log = logging.getLogger("wmdist")  # the run's log file (train.py); never the console
+log.addHandler(logging.NullHandler())  # no file attached (tests, benchmarks): say nothing
 
 
 @dataclass
@@ -250,6 +251,7 @@ class Driver:
                     try:
                         res = ray.get(ref)
                     except Exception as err:  # noqa: BLE001 - classified below
+                        log.error("%s %d: a call failed:\n%s", kind, i, err)  # the remote traceback, for the log
                         if kind == "learner":
                             self.stop_reason = ("learner_failed", f"the learner failed: {_one_line(err)}")
                             break

@@ -36,13 +36,27 @@ def start_ray(cfg: RunConfig) -> None:
         "include_dashboard": False,
         "object_store_memory": cfg.ray.object_store_mb * 1024 * 1024,
         "configure_logging": False,
-        "log_to_driver": True,
+        # workers' output (a failing actor's traceback) stays in Ray's log folder, named in the
+        # run's wmdist.log; the console gets the driver's one-line summary
+        "log_to_driver": False,
     }
     if cfg.ray.num_gpus >= 0:
         kwargs["num_gpus"] = cfg.ray.num_gpus
     # The raylet reads this when it starts and applies it to every worker it spawns.
     os.environ["RAY_worker_niceness"] = str(cfg.ray.worker_niceness)
     ray.init(**kwargs)
+    _log_where_ray_logs()
+
+
+def _log_where_ray_logs() -> None:
+    import logging
+
+    try:
+        from ray._private.worker import _global_node
+
+        logging.getLogger("wmdist").info("Ray's process logs: %s", _global_node.get_logs_dir_path())
+    except Exception:  # noqa: BLE001 - a private API: the note is a convenience
+        pass
 
 
 @dataclass
