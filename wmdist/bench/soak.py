@@ -116,13 +116,15 @@ def _ratios(counts: list[tuple[float, float, float]], start: float, window: floa
     judged = [c for c in counts if c[0] >= start]
     if len(judged) < 2:
         return None, []
-    def ratio(a, b):
-        return (b[1] - a[1]) / (b[2] - a[2]) if b[2] > a[2] else None
     windows, a = [], judged[0]
     for b in judged[1:]:
         if b[0] - a[0] >= window:
-            r = ratio(a, b)
+            r = _ratio(a, b)
             if r is not None:
                 windows.append(r)
             a = b
-    return ratio(judged[0], judged[-1]), windows
+    return _ratio(judged[0], judged[-1]), windows
+
+
+def _ratio(a: tuple[float, float, float], b: tuple[float, float, float]) -> float | None:
+    return (b[1] - a[1]) / (b[2] - a[2]) if b[2] > a[2] else None
