@@ -12,8 +12,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from tests.runtime.run_dirs import run_dir_with_checkpoint
 from wmdist.cli import main
-from wmdist.config.loader import dump_yaml, load_config
 from wmdist.runtime.checkpoint import CKPT_DIR, clean_partial, latest_checkpoint, save_checkpoint
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -96,19 +96,7 @@ def test_config_with_resume_is_refused(tmp_path, capsys):
 
 
 def _muzero_run(tmp_path: Path, overrides: list[str] | None = None) -> Path:
-    """A run directory with one checkpoint of MuZero's real learner (no Ray needed)."""
-    from wmdist.runtime.roles import build_algorithm
-    from wmdist.runtime.train import env_spec_or_error
-
-    cfg = load_config(MUZERO, [f"run.dir={tmp_path}", *(overrides or [])])
-    algo = build_algorithm(cfg, env_spec_or_error(cfg), 0)
-    learner = algo.make_learner("cpu")
-    run_dir = tmp_path / "run"
-    run_dir.mkdir(parents=True)
-    (run_dir / "config.yaml").write_text(dump_yaml(cfg))
-    state = {"learner": learner.state_dict(), "updates": 5, "version": 1, "nan_skips": 0, "sampled_sequences": 0}
-    save_checkpoint(run_dir, state, learner.get_weights(), 1, {"updates": 5, "env_steps": 100}, None, keep=2)
-    return run_dir
+    return run_dir_with_checkpoint(tmp_path, "muzero_cartpole", overrides)
 
 
 def test_resume_that_changes_the_model_is_refused_and_leaves_the_run_as_it_was(tmp_path, capsys):

@@ -13,11 +13,9 @@ import pytest
 from wmdist.algos.base import CAPABILITIES, PLANS, PREDICTS_OBSERVATIONS, REANALYZE, TWO_PLAYER, Algorithm
 from wmdist.algos.registry import ALGORITHMS, resolve
 from wmdist.cli import main
-from wmdist.config.loader import dump_yaml, load_config
-from wmdist.runtime.checkpoint import save_checkpoint
+from tests.runtime.run_dirs import run_dir_with_checkpoint
 
 ROOT = Path(__file__).resolve().parents[2]
-CONFIGS = ROOT / "configs"
 # the code that must stay algorithm-agnostic
 AGNOSTIC = [ROOT / "wmdist" / "runtime", ROOT / "wmdist" / "cli.py", ROOT / "wmdist" / "config"]
 
@@ -136,24 +134,8 @@ def test_default_dream_video_is_not_implemented():
 
 # --- 3. `wmdist dream` asks for the capability ---------------------------------------------
 
-def _run_dir(tmp_path: Path, preset: str, overrides: list[str] | None = None) -> Path:
-    """A run directory with one checkpoint of the preset's real learner (no Ray needed)."""
-    from wmdist.runtime.roles import build_algorithm
-    from wmdist.runtime.train import env_spec_or_error
-
-    cfg = load_config(str(CONFIGS / f"{preset}.yaml"), [f"run.dir={tmp_path}", *(overrides or [])])
-    algo = build_algorithm(cfg, env_spec_or_error(cfg), 0)
-    learner = algo.make_learner("cpu")
-    run_dir = tmp_path / "run"
-    run_dir.mkdir(parents=True)
-    (run_dir / "config.yaml").write_text(dump_yaml(cfg))
-    state = {"learner": learner.state_dict(), "updates": 5, "version": 1, "nan_skips": 0, "sampled_sequences": 0}
-    save_checkpoint(run_dir, state, learner.get_weights(), 1, {"updates": 5, "env_steps": 100}, None, keep=2)
-    return run_dir
-
-
 def test_dream_on_a_muzero_run_is_one_line_exit_2(tmp_path, capsys):
-    run_dir = _run_dir(tmp_path, "muzero_cartpole")
+    run_dir = run_dir_with_checkpoint(tmp_path, "muzero_cartpole")
     assert main(["dream", str(run_dir)]) == 2
     captured = capsys.readouterr()
     lines = captured.err.strip().splitlines()
@@ -165,7 +147,7 @@ def test_dream_on_a_muzero_run_is_one_line_exit_2(tmp_path, capsys):
 
 def test_dream_on_a_dreamer_run_writes_the_video(tmp_path, capsys):
     tiny = ["algo.deter=32", "algo.units=32", "algo.mlp_layers=1", "algo.stoch=4", "algo.classes=4"]
-    run_dir = _run_dir(tmp_path, "dreamerv3_cartpole", tiny)
+    run_dir = run_dir_with_checkpoint(tmp_path, "dreamerv3_cartpole", tiny)
     assert main(["dream", str(run_dir), "--horizon", "5"]) == 0
     out = capsys.readouterr().out
     assert "dream video" in out

@@ -18,7 +18,6 @@ import random
 import signal
 import tempfile
 import threading
-import time
 from pathlib import Path
 from typing import Iterator
 
