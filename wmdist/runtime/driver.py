@@ -215,7 +215,7 @@ class Driver:
             return False
         if now - self.outage_since < REPLAY_OUTAGE_SECONDS:
             return False
-        where = getattr(self.topo.replay, "server_url", "") or "the replay store"
+        where = self.topo.replay.server_url or "the replay store"
         why = err if isinstance(err, str) else _root_cause(err)
         self.stop_reason = ("error", f"replay at {where} has been unreachable for {REPLAY_OUTAGE_SECONDS:.0f}s "
                             f"({why})")
@@ -361,21 +361,21 @@ class Driver:
         except Exception:  # noqa: BLE001 - the learner is gone: nothing newer to save
             return None
         replay = self.topo.replay if self.cfg.checkpoint.replay else None
-        for attempt in range(2):
+        for last_try in (False, True):
             try:
                 path = save_checkpoint(self.topo.run_dir, state, weights, version, self.c.as_dict(), replay,
                                        self.cfg.checkpoint.keep)
             except Exception as err:  # noqa: BLE001 - reported in one line by the caller
                 log.exception("checkpoint failed")
                 self.checkpoint_error = _root_cause(err)
-                if attempt == 0 and transient(err):  # replay's server may be restarting: once more
-                    time.sleep(REPLAY_RETRY_SECONDS)
-                    self._revive_services()
-                    continue
-                return None
+                if last_try or not transient(err):
+                    return None
+                time.sleep(REPLAY_RETRY_SECONDS)  # replay's server may be restarting: once more
+                self._revive_services()
+                continue
             self.last_checkpoint, self.checkpoint_error = path, None
             return path
-        return None
+        return None  # unreachable: the last try returns
 
     def _log(self, record: dict) -> None:
         if self.log_path is None:

@@ -60,11 +60,7 @@ def env_spec_or_error(cfg: RunConfig | EnvConfig):
         raise ConfigError(f"env.id: {lines[0] if lines else type(err).__name__}") from None
 
 
-class _Signalled(KeyboardInterrupt):
-    """SIGTERM (docker stop, kill, a batch scheduler): stop like Ctrl-C, exit 143."""
-
-
-_SIGTERM_SEEN = False
+_SIGTERM_SEEN = False  # the interrupt came from SIGTERM (exit 143), not Ctrl-C (exit 130)
 
 
 def _stop_on_sigterm() -> None:
@@ -78,7 +74,7 @@ def _stop_on_sigterm() -> None:
     def interrupt(_signum, _frame):
         global _SIGTERM_SEEN
         _SIGTERM_SEEN = True
-        raise _Signalled
+        raise KeyboardInterrupt
 
     signal.signal(signal.SIGTERM, interrupt)
 
@@ -189,10 +185,10 @@ def _run(cfg: RunConfig, spec, fields: dict, run_dir: Path, ckpt: Path | None, s
                         plot=lambda: plot_learning_curve(str(run_dir / METRICS_FILE), str(run_dir / CURVE_FILE)))
         phase = "training"
         result = driver.run()
-    except KeyboardInterrupt as err:  # during start-up (the driver loop handles its own)
+    except KeyboardInterrupt:  # during start-up (the driver loop handles its own)
         log.info("interrupted while %s", phase)
         print(f"wmdist: interrupted while {phase}; {_resume_hint(run_dir)}", file=sys.stderr, flush=True)
-        return 143 if isinstance(err, _Signalled) else 130
+        return 143 if _SIGTERM_SEEN else 130
     except Exception as err:  # noqa: BLE001 - one line on the console, the traceback in the log
         log.exception("failed while %s", phase)
         print(f"wmdist: error while {phase}: {root_cause(err)}; the traceback is in {run_dir / LOG_FILE}; "
