@@ -157,7 +157,7 @@ def cmd_bench(a: argparse.Namespace) -> int:
 def cmd_monitor(a: argparse.Namespace) -> int:
     from pathlib import Path
 
-    from wmdist.runtime.monitor import monitor_commands
+    from wmdist.telemetry.monitor import monitor_commands
 
     port_file = Path(a.run_dir) / "metrics_port"
     if not port_file.is_file():

@@ -9,7 +9,7 @@ import pytest
 
 from wmdist.bench import compare, learning
 from wmdist.bench.learning import cpu_info, first_reaching, sustained
-from wmdist.runtime.curves import write_jsonl
+from wmdist.telemetry.curves import write_jsonl
 
 
 def _jsonl(path, evals: list[tuple[int, float]]):

@@ -13,7 +13,7 @@ from ray.cluster_utils import Cluster
 
 from wmdist.config.loader import load_config
 from wmdist.runtime.driver import Counters, Driver
-from wmdist.runtime.roles import build_algorithm
+from wmdist.runtime.roles.setup import build_algorithm
 from wmdist.runtime.topology import build
 from wmdist.runtime.train import env_spec_or_error
 

@@ -11,8 +11,8 @@ from typing import Iterator
 from tests.deploy.scripted_run import Source
 from wmdist.config.loader import load_config
 from wmdist.runtime.driver import Counters, Driver
-from wmdist.runtime.roles import build_algorithm
-from wmdist.runtime.telemetry import Telemetry
+from wmdist.runtime.roles.setup import build_algorithm
+from wmdist.telemetry.publish import Telemetry
 from wmdist.runtime.topology import build
 from wmdist.runtime.train import env_spec_or_error
 

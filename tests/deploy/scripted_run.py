@@ -11,7 +11,7 @@ import threading
 from dataclasses import dataclass, field
 from typing import Iterator
 
-from wmdist.metrics import MetricsHub
+from wmdist.telemetry.metrics import MetricsHub
 
 SHARDS = ("0", "1")
 

@@ -8,7 +8,7 @@ import time
 
 from tests.deploy.prom import alert_rules, dashboard_queries, query, running_prometheus
 from tests.deploy.real_run import real_run
-from wmdist.runtime.monitor import write_prometheus_config
+from wmdist.telemetry.monitor import write_prometheus_config
 
 
 def _ray_sd_file(ray, path) -> None:

@@ -7,7 +7,7 @@ import re
 import yaml
 
 from tests.deploy.prom import DEPLOY, alert_rules, dashboard_queries, promtool
-from wmdist.metrics import METRICS
+from wmdist.telemetry.metrics import METRICS
 
 PROM = DEPLOY / "prometheus"
 

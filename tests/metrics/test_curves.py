@@ -5,8 +5,8 @@ import json
 
 import pytest
 
-from wmdist.metrics import MetricsHub
-from wmdist.runtime.curves import _loss_series, _return_points, plot_learning_curve, read_jsonl, write_jsonl
+from wmdist.telemetry.metrics import MetricsHub
+from wmdist.telemetry.curves import _loss_series, _return_points, plot_learning_curve, read_jsonl, write_jsonl
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 

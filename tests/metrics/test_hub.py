@@ -7,7 +7,7 @@ import urllib.request
 import pytest
 from prometheus_client.parser import text_string_to_metric_families
 
-from wmdist.metrics import METRICS, MetricDef, MetricsHub, _check_table, snapshot_key
+from wmdist.telemetry.metrics import METRICS, MetricDef, MetricsHub, _check_table, snapshot_key
 
 REQUIRED = {
     "wmdist_env_steps_total", "wmdist_env_steps_per_second", "wmdist_episodes_total",

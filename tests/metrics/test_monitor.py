@@ -7,7 +7,7 @@ import subprocess
 import pytest
 import yaml
 
-from wmdist.runtime.monitor import monitor_commands, render_prometheus_config
+from wmdist.telemetry.monitor import monitor_commands, render_prometheus_config
 
 
 def test_monitor_writes_a_valid_config_and_prints_loopback_commands(tmp_path):

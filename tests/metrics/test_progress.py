@@ -5,8 +5,8 @@ import io
 
 import pytest
 
-from wmdist.metrics import MetricsHub
-from wmdist.runtime.progress import Progress
+from wmdist.telemetry.metrics import MetricsHub
+from wmdist.telemetry.progress import Progress
 
 
 class FakeClock:

@@ -11,7 +11,7 @@ CONFIGS = Path(__file__).resolve().parents[2] / "configs"
 
 def run_dir_with_checkpoint(tmp_path: Path, preset: str, overrides: list[str] | None = None) -> Path:
     """tmp_path/run holding the preset's resolved config and one checkpoint of its real learner."""
-    from wmdist.runtime.roles import build_algorithm
+    from wmdist.runtime.roles.setup import build_algorithm
     from wmdist.runtime.train import env_spec_or_error
 
     cfg = load_config(str(CONFIGS / f"{preset}.yaml"), [f"run.dir={tmp_path}", *(overrides or [])])

@@ -10,10 +10,10 @@ from pathlib import Path
 import numpy as np
 import torch
 
-import wmdist.runtime.collector as collector_mod
+import wmdist.runtime.roles.collector as collector_mod
 from wmdist.config.loader import load_config
 from wmdist.envs.factory import env_spec
-from wmdist.runtime.roles import build_algorithm
+from wmdist.runtime.roles.setup import build_algorithm
 
 torch.set_num_threads(1)
 

@@ -46,7 +46,7 @@ def test_board_bench_plays_the_solver_and_plots_losses(tmp_path, capsys):
 
     from wmdist.bench.board import main as board_main
     from wmdist.envs.factory import env_spec
-    from wmdist.runtime.roles import build_algorithm
+    from wmdist.runtime.roles.setup import build_algorithm
 
     preset = Path(__file__).parents[2] / "configs" / "muzero_tictactoe.yaml"
     cfg = load_config(str(preset), [f"run.dir={tmp_path}", "algo.search.num_simulations=4", "algo.hidden=[8]",

@@ -17,7 +17,7 @@ import pytest
 
 from wmdist.config.loader import load_config
 from wmdist.runtime.driver import LEARNER_SLICE_SECONDS, Counters, Driver
-from wmdist.runtime.roles import build_algorithm
+from wmdist.runtime.roles.setup import build_algorithm
 from wmdist.runtime.topology import build
 from wmdist.runtime.train import env_spec_or_error
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 from types import SimpleNamespace
 
 from wmdist.runtime.driver import Counters, Driver
-from wmdist.runtime.roles import process_tag
+from wmdist.runtime.roles.setup import process_tag
 
 
 def _driver(max_restarts: int = -1) -> Driver:

@@ -14,7 +14,7 @@ from wmdist.config.errors import ConfigError
 from wmdist.config.loader import dump_yaml, load_config
 from wmdist.runtime import checkpoint as ck
 from wmdist.runtime.driver import Counters, Driver
-from wmdist.runtime.roles import build_algorithm
+from wmdist.runtime.roles.setup import build_algorithm
 from wmdist.runtime.topology import build
 from wmdist.runtime.train import env_spec_or_error
 
@@ -54,8 +54,8 @@ class _EveryRoleDriver(Driver):
 def test_full_topology_versions_reach_collectors_and_actions_follow_weights(ray_session, tmp_path):
     """Every role runs; versions advance and reach every collector; actions follow weights; the
     metrics endpoint serves every declared metric."""
-    from wmdist.metrics import METRICS
-    from wmdist.runtime.telemetry import Telemetry
+    from wmdist.telemetry.metrics import METRICS
+    from wmdist.telemetry.publish import Telemetry
 
     ray = ray_session
     topo = _topology(tmp_path, "reanalyze.num=1", "eval.every_seconds=1", "run.max_updates=80",

@@ -13,7 +13,7 @@ import json
 import sys
 from pathlib import Path
 
-from wmdist.runtime.curves import read_jsonl
+from wmdist.telemetry.curves import read_jsonl
 
 
 def plot_losses(metrics: Path, games_per_eval: int, png: Path, title: str) -> None:

@@ -19,7 +19,7 @@ import sys
 import time
 from pathlib import Path
 
-from wmdist.runtime.curves import read_jsonl
+from wmdist.telemetry.curves import read_jsonl
 
 
 def eval_records(jsonl: Path, budget_env_steps: float | None = None,

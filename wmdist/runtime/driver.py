@@ -380,7 +380,7 @@ class Driver:
     def _log(self, record: dict) -> None:
         if self.log_path is None:
             return
-        from wmdist.runtime.curves import write_jsonl
+        from wmdist.telemetry.curves import write_jsonl
 
         write_jsonl(self.log_path, {"time": round(self.elapsed(), 3), "env_steps": self.c.env_steps,
                                     "updates": self.c.updates, **record})

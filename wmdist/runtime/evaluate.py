@@ -13,7 +13,7 @@ from wmdist.algos.base import PREDICTS_OBSERVATIONS
 from wmdist.config.errors import ConfigError
 from wmdist.runtime import checkpoint as ck
 from wmdist.runtime.board_eval import default_opponent, greedy_action, play_games
-from wmdist.runtime.roles import build_algorithm
+from wmdist.runtime.roles.setup import build_algorithm
 from wmdist.runtime.train import env_spec_or_error, load_run_config
 
 
@@ -61,7 +61,7 @@ def evaluate_run(run_dir: str, episodes: int = 10, video: str | None = None, hum
                   f"lost {(rs < 0).sum()}", file=out)
         return 0
     from wmdist.envs.vector import make_vector_env
-    from wmdist.runtime.evaluator import play_episodes
+    from wmdist.runtime.roles.evaluator import play_episodes
 
     venv = make_vector_env(cfg.env, min(episodes, cfg.eval.envs), cfg.run.seed + 5)
     returns, lengths = play_episodes(policy, venv, episodes)

@@ -31,7 +31,7 @@ class Checked:
 
 
 def check_env_and_algo(cfg: RunConfig) -> tuple[EnvSpec, Any]:
-    from wmdist.runtime.roles import build_algorithm
+    from wmdist.runtime.roles.setup import build_algorithm
     from wmdist.runtime.train import env_spec_or_error
 
     spec = env_spec_or_error(cfg)
@@ -104,7 +104,7 @@ def start_metrics(cfg: RunConfig):
     """Bind the exporter now, so a busy port fails before anything starts (kept for the run)."""
     if not cfg.metrics.enabled:
         return None
-    from wmdist.metrics import MetricsHub
+    from wmdist.telemetry.metrics import MetricsHub
 
     hub = MetricsHub(host=cfg.metrics.host, port=cfg.metrics.port)
     try:

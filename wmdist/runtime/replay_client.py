@@ -45,7 +45,7 @@ from wmdist.replay.storage_redis import (
     new_keys,
     pending_entry,
 )
-from wmdist.runtime.replay_actor import LimiterActor, ShardActor
+from wmdist.runtime.roles.replay_actor import LimiterActor, ShardActor
 
 
 def route(source_id: int, episode_id: np.ndarray, shards: int) -> np.ndarray:

@@ -103,12 +103,12 @@ def build(cfg: RunConfig, spec: EnvSpec, run_dir: Path, fields: dict) -> Topolog
     """Create every actor (after checking the cluster can hold them all)."""
     import ray
 
-    from wmdist.runtime.collector import Collector
-    from wmdist.runtime.evaluator import EvaluatorRole
-    from wmdist.runtime.learner import LearnerRole
-    from wmdist.runtime.reanalyzer import ReanalyzerRole
+    from wmdist.runtime.roles.collector import Collector
+    from wmdist.runtime.roles.evaluator import EvaluatorRole
+    from wmdist.runtime.roles.learner import LearnerRole
+    from wmdist.runtime.roles.reanalyzer import ReanalyzerRole
     from wmdist.runtime.replay_client import create_replay
-    from wmdist.runtime.weights import WeightBroker
+    from wmdist.runtime.roles.weights import WeightBroker
 
     check_fits(cfg, ray.cluster_resources())
     res = roles(cfg)

@@ -154,10 +154,10 @@ def _run(cfg: RunConfig, spec, fields: dict, run_dir: Path, ckpt: Path | None, s
          out) -> int:
     """Start Ray and the roles, run the driver; every failure here is one line plus the log."""
     from wmdist.runtime import checkpoint as ck
-    from wmdist.runtime.curves import plot_learning_curve
+    from wmdist.telemetry.curves import plot_learning_curve
     from wmdist.runtime.driver import Counters, Driver
     from wmdist.runtime.faults import root_cause
-    from wmdist.runtime.telemetry import Telemetry
+    from wmdist.telemetry.publish import Telemetry
     from wmdist.runtime.topology import build, start_ray
 
     topo, telemetry, driver = None, None, None

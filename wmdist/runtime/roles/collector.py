@@ -14,8 +14,8 @@ import numpy as np
 
 from wmdist.config.schema import RunConfig
 from wmdist.envs.spec import EnvSpec
-from wmdist.runtime.roles import build_algorithm, device_for, process_tag, set_threads
-from wmdist.runtime.weights import pull
+from wmdist.runtime.roles.setup import build_algorithm, device_for, process_tag, set_threads
+from wmdist.runtime.roles.weights import pull
 
 
 class Collector:

@@ -9,8 +9,8 @@ import numpy as np
 from wmdist.algos.base import Policy
 from wmdist.config.schema import RunConfig
 from wmdist.envs.spec import EnvSpec
-from wmdist.runtime.roles import build_algorithm, process_tag, set_threads
-from wmdist.runtime.weights import pull
+from wmdist.runtime.roles.setup import build_algorithm, process_tag, set_threads
+from wmdist.runtime.roles.weights import pull
 
 
 def play_episodes(policy: Policy, venv: Any, episodes: int, explore: bool = False,

@@ -18,7 +18,7 @@ from wmdist.algos.base import NonFiniteLoss
 from wmdist.config.schema import RunConfig
 from wmdist.envs.spec import EnvSpec
 from wmdist.runtime.faults import root_cause, transient
-from wmdist.runtime.roles import build_algorithm, device_for, set_threads
+from wmdist.runtime.roles.setup import build_algorithm, device_for, set_threads
 
 
 class Prefetcher:

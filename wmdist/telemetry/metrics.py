@@ -135,7 +135,7 @@ class MetricsHub:
         """
         d = METRICS.get(name)
         if d is None:
-            raise ValueError(f"undeclared metric {name!r}: declare it in wmdist.metrics.METRICS")
+            raise ValueError(f"undeclared metric {name!r}: declare it in wmdist.telemetry.metrics.METRICS")
         if set(labels) != set(d.labels):
             raise ValueError(f"metric {name!r} takes labels {list(d.labels)}, got {sorted(labels)}")
         key = tuple(str(labels[k]) for k in d.labels)

@@ -63,8 +63,8 @@ class Telemetry:
     def __init__(self, cfg: RunConfig, run_dir: Path, out: IO[str], hub=None) -> None:
         """`hub`: an exporter already bound (`wmdist train` binds it before Ray starts, so a busy
         port is a one-line error); None starts one here when metrics are enabled."""
-        from wmdist.metrics import MetricsHub
-        from wmdist.runtime.progress import Progress
+        from wmdist.telemetry.metrics import MetricsHub
+        from wmdist.telemetry.progress import Progress
 
         self.hub = hub
         if self.hub is None and cfg.metrics.enabled:

@@ -17,7 +17,7 @@ from typing import Any, Iterator, Mapping
 # (safe from a background thread of the driver).
 from matplotlib.figure import Figure
 
-from wmdist.metrics import snapshot_key
+from wmdist.telemetry.metrics import snapshot_key
 
 # A record comes in one of two spellings; both are read:
 #  - the driver's log line: {"env_steps", "updates", "kind": "train"|"eval", "train_return",

@@ -13,7 +13,7 @@ import sys
 import time
 from typing import Any, Callable, Mapping, TextIO
 
-from wmdist.metrics import snapshot_key
+from wmdist.telemetry.metrics import snapshot_key
 
 
 def _num(x: float | None) -> str:

@@ -7,8 +7,8 @@ from typing import Any
 
 from wmdist.config.schema import RunConfig
 from wmdist.envs.spec import EnvSpec
-from wmdist.runtime.roles import build_algorithm, device_for, process_tag, set_threads
-from wmdist.runtime.weights import pull
+from wmdist.runtime.roles.setup import build_algorithm, device_for, process_tag, set_threads
+from wmdist.runtime.roles.weights import pull
 
 
 class ReanalyzerRole:
