@@ -15,7 +15,7 @@ class EnvConfig:
     Fields that do not apply to the chosen family are ignored (e.g. Atari options for dmc).
     """
 
-    id: str = param("gym:CartPole-v1", "env id: gym:<id>, dmc:<domain>-<task>, atari:<Game>, board:<game>")
+    id: str = param("gym:CartPole-v1", "env id: gym:<id>, dmc:<domain>-<task>, atari:<Game>, minatar:<Game>, board:<game>")
     pixels: bool = param(False, "dmc: observe image_size x image_size RGB pixels instead of state")
     image_size: int = param(64, "dmc: side of the square pixel observation", ge=8, le=1024)
     camera: int = param(-1, "dmc: camera id for pixels and render; -1 = domain default", ge=-1)
@@ -29,6 +29,12 @@ class EnvConfig:
     sticky_actions: float = param(0.0, "atari: repeat_action_probability (0.25 in Machado et al.)", ge=0.0, le=1.0)
     max_episode_frames: int = param(108000, "atari: emulator frame cap (108000 = 27,000 steps); 0 = none", ge=0)
     noop_max: int = param(30, "atari: up to this many no-op actions after reset", ge=0)
+    minatar_sticky_actions: float = param(0.1, "minatar: probability that the previous action repeats (MinAtar paper: 0.1)",
+                                          ge=0.0, le=1.0)
+    minatar_full_action_set: bool = param(True, "minatar: all 6 actions (MinAtar paper); false = the game's minimal set")
+    minatar_ramping: bool = param(True, "minatar: difficulty ramping as the game goes on (MinAtar paper default)")
+    minatar_obs: str = param("image", "minatar: image = uint8 (10, 10, C) of 0/255 (conv nets); "
+                                      "vector = float32 (100*C,) of 0/1 (MLP encoders)", choices=("image", "vector"))
 
     def validate(self) -> "EnvConfig":
         """Raise ValueError (one line naming the field) on a wrong type or out-of-range value."""
@@ -38,6 +44,8 @@ class EnvConfig:
                 continue
             _check_type(f.name, value, f.default)
             meta = f.metadata
+            if meta.get("choices") and value not in meta["choices"]:
+                raise ValueError(f"env.{f.name} must be one of {list(meta['choices'])}, got {value!r}")
             for key, ok, word in (
                 ("ge", lambda v, b: v >= b, ">="),
                 ("gt", lambda v, b: v > b, ">"),

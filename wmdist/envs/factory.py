@@ -3,6 +3,7 @@
     gym:<gymnasium id>       gym:CartPole-v1, gym:Pendulum-v1
     dmc:<domain>-<task>      dmc:cartpole-balance, dmc:walker-walk (state, or pixels)
     atari:<Game>             atari:Pong, atari:Breakout (ALE, standard preprocessing)
+    minatar:<Game>           minatar:Breakout, minatar:Asterix (MinAtar 10x10 grids)
     board:<game>             board:tictactoe, board:connect4 (two players)
 """
 from __future__ import annotations
@@ -20,6 +21,8 @@ _FAMILIES: dict[str, str] = {
     "gym": "any gymnasium id, e.g. gym:CartPole-v1, gym:Pendulum-v1",
     "dmc": "DeepMind Control Suite <domain>-<task>, state or pixels, e.g. dmc:cartpole-balance, dmc:walker-walk",
     "atari": "ALE game with standard preprocessing, e.g. atari:Pong, atari:Breakout",
+    "minatar": "MinAtar 10x10 game: minatar:Asterix, minatar:Breakout, minatar:Freeway, minatar:Seaquest, "
+               "minatar:SpaceInvaders",
     "board": "two-player board games: board:tictactoe, board:connect4",
 }
 
@@ -43,6 +46,10 @@ def _names(family: str) -> list[str]:
         from wmdist.envs.atari import atari_games
 
         return atari_games()
+    if family == "minatar":
+        from wmdist.envs.minatar import minatar_games
+
+        return minatar_games()
     from wmdist.envs.boardgames.game import GAMES
 
     return list(GAMES)
@@ -54,7 +61,7 @@ def _unknown(env_id: str, candidates: list[str]) -> ValueError:
     hint = f"closest match: '{lowered[close[0]]}'" if close else "no close match"
     return ValueError(
         f"unknown env id '{env_id}' ({hint}); families: gym:<gymnasium id>, "
-        "dmc:<domain>-<task>, atari:<Game>, board:tictactoe|connect4"
+        "dmc:<domain>-<task>, atari:<Game>, minatar:<Game>, board:tictactoe|connect4"
     )
 
 
@@ -120,6 +127,10 @@ def make_env(cfg: EnvConfig, seed: int) -> Env:
         from wmdist.envs.atari import AtariEnv
 
         return AtariEnv(cfg, seed, name)
+    if family == "minatar":
+        from wmdist.envs.minatar import MinAtarEnv
+
+        return MinAtarEnv(cfg, seed, name)
     if cfg.action_repeat != 1:
         raise ValueError(f"env.action_repeat must be 1 for board games, got {cfg.action_repeat}")
     from wmdist.envs.boardgames.env import BoardEnv
