@@ -1,4 +1,4 @@
-"""Open-loop prediction video: how well the world model imagines the future.
+"""Open-loop prediction video: how well an RSSM world model imagines the future (Dreamer, PlaNet).
 
 The policy plays `context + horizon` real steps. The model filters the first `context`
 observations (posterior), then rolls the prior forward with the real actions for `horizon`
@@ -10,19 +10,31 @@ column marks where imagination starts.
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Protocol
 
 import imageio.v2 as imageio
 import numpy as np
 import torch
 
-from wmdist.algos.base import Weights
-from wmdist.algos.dreamer.learner import load_policy_weights
-from wmdist.algos.dreamer.nets import ActorCritic, WorldModel, action_to_model
+from wmdist.algos.base import Policy, Weights
 from wmdist.envs.env import Env
+from wmdist.envs.spec import EnvSpec
+from wmdist.nets.actions import action_to_model
 from wmdist.nets.dists import symexp
+from wmdist.nets.world_model import WorldModel
 
 
-def _rollout(algo, weights: Weights, env: Env, steps: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
+class RSSMAlgorithm(Protocol):
+    """What the video needs of an algorithm: its spec, a policy, and its world model loaded from weights."""
+
+    spec: EnvSpec
+
+    def make_policy(self, device: str = "cpu") -> Policy: ...
+
+    def world_model(self, weights: Weights) -> WorldModel: ...
+
+
+def _rollout(algo: RSSMAlgorithm, weights: Weights, env: Env, steps: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
     """Real observations [steps, *obs] and the actions taken at them [steps, ...]."""
     policy = algo.make_policy()
     policy.set_weights(weights, 0)
@@ -42,11 +54,10 @@ def _rollout(algo, weights: Weights, env: Env, steps: int, seed: int) -> tuple[n
 
 
 @torch.no_grad()
-def predict_open_loop(algo, weights: Weights, obs: np.ndarray, actions: np.ndarray, context: int, seed: int = 0) -> np.ndarray:
+def predict_open_loop(algo: RSSMAlgorithm, weights: Weights, obs: np.ndarray, actions: np.ndarray, context: int,
+                      seed: int = 0) -> np.ndarray:
     """Model predictions of every observation [T, *obs]: posterior for t < context, prior after."""
-    wm = WorldModel(algo.cfg, algo.spec).eval()
-    ac = ActorCritic(algo.cfg, algo.spec, wm.rssm.z_dim)
-    load_policy_weights(wm, ac, weights)
+    wm = algo.world_model(weights).eval()
     gen = torch.Generator().manual_seed(seed)
     rssm = wm.rssm
     obs_t = torch.as_tensor(obs)
@@ -64,7 +75,7 @@ def predict_open_loop(algo, weights: Weights, obs: np.ndarray, actions: np.ndarr
         pred = wm.decode(h, z)[0]
         if wm.image:
             pred = ((pred + 0.5).clamp(0, 1) * 255).to(torch.uint8)
-        elif algo.cfg.symlog_targets:
+        elif wm.cfg.symlog_targets:
             pred = symexp(pred)
         preds.append(pred.numpy())
         a_prev = act_t[t:t + 1]
@@ -89,7 +100,7 @@ def _strip(real: np.ndarray, pred: np.ndarray, upto: int, context: int, scale: i
     return np.repeat(np.repeat(img, scale, 0), scale, 1)
 
 
-def open_loop_video(algo, weights: Weights, env: Env, out_path: str, context: int = 5, horizon: int = 45, seed: int = 0) -> str:
+def open_loop_video(algo: RSSMAlgorithm, weights: Weights, env: Env, out_path: str, context: int = 5, horizon: int = 45, seed: int = 0) -> str:
     """Write the open-loop GIF to `out_path` and return its path."""
     if context < 1 or horizon < 1:
         raise ValueError(f"context and horizon must be >= 1, got {context} and {horizon}")

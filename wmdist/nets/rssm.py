@@ -1,4 +1,4 @@
-"""The recurrent state-space model shared by Dreamer V1/V2/V3.
+"""The recurrent state-space model (PlaNet) shared by PlaNet and Dreamer V1/V2/V3.
 
 State s_t = (h_t, z_t). Transition h_t = GRU(h_{t-1}, img_in([z_{t-1}, a_{t-1}])); prior
 p(z_t | h_t); posterior q(z_t | h_t, e_t) with e_t the observation embedding. The latent is
@@ -9,14 +9,41 @@ Gaussian's [mean, std] concatenated [..., 2S].
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Protocol
 
 import torch
 import torch.nn.functional as F
 from torch import nn
 
-from wmdist.algos.dreamer.config import DreamerConfig
-from wmdist.algos.dreamer.layers import GRUCell, Latent, SplitLinear, norm_act
+from wmdist.nets.latent_layers import GRUCell, Latent, SplitLinear, norm_act
 from wmdist.nets.dists import categorical_kl, gaussian_kl, sample_index_from_probs, unimix_logits
+
+
+class RSSMConfig(Protocol):
+    """The fields the RSSM reads (a resolved `DreamerConfig` or `RSSMSettings`)."""
+
+    deter: int  # GRU width
+    stoch: int  # Gaussian size, or number of categoricals
+    classes: int  # classes per categorical (0 = Gaussian latent: PlaNet, Dreamer V1)
+    units: int  # hidden width of the prior/posterior MLPs and the transition's input layer
+    act: str  # activation (a key of `wmdist.nets.mlp.ACTIVATIONS`)
+    norm: bool  # LayerNorm in the hidden layers
+    gru_norm: bool  # LayerNorm inside the GRU
+    unimix: float  # uniform mix in every categorical (0 for Gaussians)
+
+
+@dataclass(frozen=True)
+class RSSMSettings:
+    """A concrete `RSSMConfig` for algorithms whose config names these fields differently."""
+
+    deter: int
+    stoch: int
+    classes: int
+    units: int
+    act: str
+    norm: bool = False
+    gru_norm: bool = False
+    unimix: float = 0.0
 
 
 @dataclass
@@ -30,7 +57,7 @@ class Observed:
 
 
 class RSSM(nn.Module):
-    def __init__(self, cfg: DreamerConfig, embed_dim: int, action_dim: int) -> None:
+    def __init__(self, cfg: RSSMConfig, embed_dim: int, action_dim: int) -> None:
         super().__init__()
         self.cfg = cfg
         self.deter, self.stoch, self.classes = cfg.deter, cfg.stoch, cfg.classes

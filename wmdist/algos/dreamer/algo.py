@@ -3,10 +3,11 @@ from __future__ import annotations
 
 from wmdist.algos.base import PREDICTS_OBSERVATIONS, Algorithm, FieldSpec, Weights
 from wmdist.algos.dreamer.config import DreamerConfig
-from wmdist.algos.dreamer.learner import DreamerLearner
+from wmdist.algos.dreamer.learner import DreamerLearner, load_world_model
 from wmdist.algos.dreamer.policy import DreamerPolicy
 from wmdist.envs.env import Env
 from wmdist.envs.spec import EnvSpec
+from wmdist.nets.world_model import WorldModel
 
 
 class Dreamer(Algorithm):
@@ -39,7 +40,11 @@ class Dreamer(Algorithm):
     def make_learner(self, device: str = "cpu") -> DreamerLearner:
         return DreamerLearner(self.cfg, self.spec, device, self.seed)
 
+    def world_model(self, weights: Weights) -> WorldModel:
+        """The world model loaded from a weight snapshot (for the open-loop video)."""
+        return load_world_model(WorldModel(self.cfg, self.spec), weights)
+
     def dream_video(self, weights: Weights, env: Env, path: str, context: int = 5, horizon: int = 45) -> str:
-        from wmdist.algos.dreamer.dream import open_loop_video  # imageio only when a video is made
+        from wmdist.algos.dream_video import open_loop_video  # imageio only when a video is made
 
         return open_loop_video(self, weights, env, path, context=context, horizon=horizon)

@@ -14,8 +14,8 @@ import torch
 import torch.nn.functional as F
 
 from wmdist.algos.dreamer.config import DreamerConfig
-from wmdist.algos.dreamer.kl import masked_mean
-from wmdist.algos.dreamer.layers import Latent
+from wmdist.nets.kl import masked_mean
+from wmdist.nets.latent_layers import Latent
 from wmdist.algos.dreamer.nets import ActorCritic, WorldModel
 from wmdist.algos.dreamer.returns import PercentileNormalizer, lambda_returns
 from wmdist.nets.dists import twohot_mean, twohot_nll

@@ -10,8 +10,8 @@ import torch
 from wmdist.algos.base import Batch, Learner, NonFiniteLoss, UpdateResult, Weights
 from wmdist.algos.dreamer.config import DreamerConfig
 from wmdist.algos.dreamer.imagine import ActorCriticLoss, Start
-from wmdist.algos.dreamer.kl import kl_loss, masked_mean
-from wmdist.algos.dreamer.layers import Latent
+from wmdist.nets.kl import kl_loss, masked_mean
+from wmdist.nets.latent_layers import Latent
 from wmdist.algos.dreamer.nets import ActorCritic, WorldModel, action_to_model
 from wmdist.envs.spec import EnvSpec
 from wmdist.nets.dists import bernoulli_nll, twohot_bins, twohot_loss
@@ -26,12 +26,20 @@ def policy_weights(wm: WorldModel, ac: ActorCritic) -> Weights:
 
 
 def load_policy_weights(wm: WorldModel, ac: ActorCritic, weights: Weights) -> None:
-    wm_sd = {k[3:]: torch.as_tensor(np.array(v)) for k, v in weights.items() if k.startswith("wm.")}
     actor_sd = {k[6:]: torch.as_tensor(np.array(v)) for k, v in weights.items() if k.startswith("actor.")}
-    if not wm_sd or not actor_sd:
+    if not actor_sd:
         raise ValueError("Dreamer weights need 'wm.*' and 'actor.*' entries")
-    wm.load_state_dict(wm_sd)
+    load_world_model(wm, weights)
     ac.actor.load_state_dict(actor_sd)
+
+
+def load_world_model(wm: WorldModel, weights: Weights) -> WorldModel:
+    """Load the 'wm.*' entries of a weight snapshot into `wm` and return it."""
+    wm_sd = {k[3:]: torch.as_tensor(np.array(v)) for k, v in weights.items() if k.startswith("wm.")}
+    if not wm_sd:
+        raise ValueError("weights need 'wm.*' entries (the world model)")
+    wm.load_state_dict(wm_sd)
+    return wm
 
 
 class DreamerLearner(Learner):

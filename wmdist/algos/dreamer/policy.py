@@ -7,7 +7,7 @@ import torch.nn.functional as F
 
 from wmdist.algos.base import Policy, Weights
 from wmdist.algos.dreamer.config import DreamerConfig
-from wmdist.algos.dreamer.layers import Latent
+from wmdist.nets.latent_layers import Latent
 from wmdist.algos.dreamer.learner import load_policy_weights
 from wmdist.algos.dreamer.nets import ActorCritic, WorldModel, action_to_env
 from wmdist.envs.spec import EnvSpec

@@ -1,0 +1,87 @@
+"""A reconstructive RSSM world model: encoder, RSSM, reward / continue / decoder heads.
+
+PlaNet's model, kept by Dreamer V1-V3 (each version changes sizes, heads and the latent);
+PlaNet and Dreamer both build it from their configs.
+"""
+from __future__ import annotations
+
+from typing import Protocol
+
+import torch
+from torch import nn
+
+from wmdist.envs.spec import EnvSpec
+from wmdist.nets.conv import ConvDecoder, ConvEncoder
+from wmdist.nets.dists import symlog
+from wmdist.nets.latent_layers import Heads, Latent
+from wmdist.nets.mlp import mlp
+from wmdist.nets.rssm import RSSM, RSSMConfig
+
+
+class WorldModelConfig(RSSMConfig, Protocol):
+    """The fields the world model reads beyond the RSSM's."""
+
+    mlp_layers: int  # hidden layers of the vector encoder and of every head
+    cnn_depth: int  # channels of the first conv layer (64x64 images)
+    symlog_inputs: bool  # symlog vector observations before the encoder
+    symlog_targets: bool  # the vector decoder predicts symlog(obs)
+    reward_head: str  # "mse" (unit Gaussian) or "twohot"
+    bins: int  # two-hot bins (reward_head "twohot")
+    cont_head: bool  # learn a continue head
+
+
+def head_width(kind: str, cfg: WorldModelConfig) -> int:
+    return cfg.bins if kind == "twohot" else 1
+
+
+class WorldModel(nn.Module):
+    """Encoder + RSSM + reward / continue / decoder heads (cfg: a resolved `DreamerConfig` or PlaNet's settings)."""
+
+    def __init__(self, cfg: WorldModelConfig, spec: EnvSpec) -> None:
+        super().__init__()
+        self.cfg, self.spec = cfg, spec
+        self.image = spec.obs_kind == "image"
+        if self.image:
+            if tuple(spec.obs_shape[:2]) != (64, 64):
+                raise ValueError(f"Dreamer's CNN needs 64x64 images, got obs_shape {spec.obs_shape}")
+            self.encoder: nn.Module = ConvEncoder(spec.obs_shape[2], cfg.cnn_depth, cfg.act, cfg.norm)
+            embed_dim = self.encoder.out_dim
+        else:
+            if len(spec.obs_shape) != 1:
+                raise ValueError(f"Dreamer's vector encoder needs obs_shape (D,), got {spec.obs_shape}")
+            self.encoder = mlp(spec.obs_shape[0], [cfg.units] * cfg.mlp_layers, None, cfg.act, cfg.norm)
+            embed_dim = cfg.units
+        self.rssm = RSSM(cfg, embed_dim, spec.action_dim)
+        dims = {"h": cfg.deter, "z": self.rssm.z_dim}
+        heads = {"reward": head_width(cfg.reward_head, cfg)}
+        if cfg.cont_head:
+            heads["cont"] = 1
+        if not self.image:
+            heads["decoder"] = spec.obs_shape[0]
+        zero = ("reward",) if cfg.reward_head == "twohot" else ()
+        self.heads = Heads(dims, heads, cfg.units, cfg.mlp_layers, cfg.act, cfg.norm, zero_init=zero)
+        self.last_head = "cont" if cfg.cont_head else "reward"  # heads needed in imagination
+        if self.image:
+            self.image_decoder = ConvDecoder(cfg.deter + self.rssm.z_dim, spec.obs_shape[2], cfg.cnn_depth, cfg.act, cfg.norm)
+
+    def encode(self, obs: torch.Tensor) -> torch.Tensor:
+        """[..., *obs_shape] -> [..., E]."""
+        if self.image:
+            return self.encoder(obs)
+        x = obs.float()
+        return self.encoder(symlog(x) if self.cfg.symlog_inputs else x)
+
+    def obs_target(self, obs: torch.Tensor) -> torch.Tensor:
+        """What the decoder regresses: symlog(obs) (V3 vectors), obs, or pixels in [-0.5, 0.5]."""
+        if self.image:
+            return obs.float() / 255.0 - 0.5
+        x = obs.float()
+        return symlog(x) if self.cfg.symlog_targets else x
+
+    def decode(self, h: torch.Tensor, z: Latent, head_out: dict[str, torch.Tensor] | None = None) -> torch.Tensor:
+        """Predicted observation target for states [N] -> [N, *obs_shape] (in `obs_target` space)."""
+        if self.image:
+            return self.image_decoder(torch.cat([h, z.dense()], -1))
+        if head_out is None:
+            head_out = self.heads({"h": h, "z": z})
+        return head_out["decoder"]
