@@ -8,7 +8,8 @@ from wmdist.algos.base import Policy
 from wmdist.envs.boardgames.env import BoardEnv
 from wmdist.envs.boardgames.game import State
 from wmdist.envs.boardgames.solver import best_actions
-from wmdist.runtime.board_eval import default_opponent, play_games, summary
+from wmdist.envs.boardgames.mcts_opponent import MCTSOpponent
+from wmdist.runtime.board_eval import default_opponent, judge_lines, play_games, summary
 
 
 def _board_from_obs(obs: np.ndarray, to_play: int) -> list[int]:
@@ -27,6 +28,26 @@ class SolverPolicy(Policy):
     def act(self, obs, first, legal, to_play, explore):  # noqa: D102
         acts = [best_actions(_board_from_obs(o, int(p)), int(p))[0] for o, p in zip(obs, to_play)]
         return np.array(acts), {}
+
+
+class MissesWinsPolicy(SolverPolicy):
+    """The solver, except that it takes an immediate win only when every move wins."""
+
+    def act(self, obs, first, legal, to_play, explore):  # noqa: D102
+        acts = []
+        for o, p, m in zip(obs, to_play, legal):
+            board = _board_from_obs(o, int(p))
+            wins = {a for a in np.flatnonzero(m) if _wins(board, int(a), int(p))}
+            others = [a for a in np.flatnonzero(m) if a not in wins]
+            acts.append(others[0] if wins and others else best_actions(board, int(p))[0])
+        return np.array(acts), {}
+
+
+def _wins(board: list[int], a: int, player: int) -> bool:
+    b = list(board)
+    b[a] = player + 1
+    lines = [(0, 1, 2), (3, 4, 5), (6, 7, 8), (0, 3, 6), (1, 4, 7), (2, 5, 8), (0, 4, 8), (2, 4, 6)]
+    return any(b[i] == b[j] == b[k] == player + 1 for i, j, k in lines)
 
 
 class RandomPolicy(SolverPolicy):
@@ -60,3 +81,28 @@ def test_the_solver_opponent_varies_its_optimal_moves() -> None:
     first_moves = {opp(State(board=(0,) * 9, to_play=0)) for _ in range(50)}
     assert len(first_moves) > 1  # every opening is a draw, so several are optimal
     assert first_moves <= set(range(9))
+
+
+def test_judge_lines_counts_lost_lines_of_a_weak_agent_only() -> None:
+    env = BoardEnv("tictactoe")
+    perfect = judge_lines(SolverPolicy(), env)
+    assert perfect["lost_lines"] == 0 and perfect["losing_lines"] == []
+    assert 0 < perfect["lines"] <= 384 + 945
+    weak = judge_lines(MissesWinsPolicy(), env)
+    assert weak["lost_lines"] == weak["lost_lines_p0"] + weak["lost_lines_p1"] > 0
+    assert 0 < len(weak["losing_lines"]) <= 6  # up to 3 examples per side
+    # Every example is a real game the agent lost.
+    for line in weak["losing_lines"]:
+        env.reset()
+        for a in line:
+            _, reward, done, _ = env.step(a)
+        mover = (len(line) - 1) % 2
+        assert done and reward == 1.0 and env.state.winner == mover
+
+
+def test_connect4_default_opponent_is_mcts_and_beats_a_random_agent() -> None:
+    env = BoardEnv("connect4")
+    opponent = default_opponent(env, seed=0, rollouts=30)
+    assert isinstance(opponent.__self__, MCTSOpponent) and opponent.__self__.rollouts == 30
+    s = summary(play_games(RandomPolicy(), env, 6, opponent))
+    assert s["lost_p0"] + s["lost_p1"] >= 5

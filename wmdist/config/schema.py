@@ -64,10 +64,22 @@ class ReanalyzeConfig:
 
 @dataclass
 class EvalConfig:
-    every_seconds: float = param(60.0, "seconds between evaluations (0 = no evaluator)", ge=0)
+    every_seconds: float = param(60.0, "seconds between evaluations (0 = not by time)", ge=0)
+    every_env_steps: int = param(0, "also evaluate each time this many more env steps were taken "
+                                    "(0 = not by steps), so a run that learns in 3k steps is seen doing so; "
+                                    "with both 0 there is no evaluator", ge=0)
     episodes: int = param(10, "greedy episodes per evaluation", ge=1)
     envs: int = param(5, "envs the evaluator steps together", ge=1)
     cpus: float = param(0.25, "Ray CPUs for the evaluator", gt=0)
+    opponent_rollouts: int = param(200, "board:connect4: random rollouts per move of the MCTS (UCT) opponent", ge=1)
+    judge_lines: bool = param(True, "board:tictactoe: also play the greedy agent against every opponent line and "
+                                    "log the lines it loses (eval_lost_lines)")
+    gpus: float = param(0.0, "Ray GPUs for the evaluator", ge=0)
+    resources: dict = param({}, "custom Ray resources for the evaluator")
+
+    @property
+    def enabled(self) -> bool:
+        return self.every_seconds > 0 or self.every_env_steps > 0
 
 
 @dataclass

@@ -102,7 +102,7 @@ class Game:
                 raise IllegalMove(f"illegal move {a}: cell occupied")
         board = list(s.board)
         board[cell] = s.to_play + 1
-        won = self._line_through(board, cell)
+        won = self.completes_line(board, cell)
         return State(
             board=tuple(board), to_play=1 - s.to_play,
             winner=s.to_play if won else -1, moves=s.moves + 1,
@@ -120,7 +120,7 @@ class Game:
         opp = board == (1 - s.to_play) + 1
         return np.concatenate([own, opp, np.ones_like(own)]).astype(np.float32)
 
-    def _line_through(self, board: list[int], cell: int) -> bool:
+    def completes_line(self, board: list[int], cell: int) -> bool:
         """True if the stone at `cell` is part of `k` in a row."""
         r0, c0 = divmod(cell, self.cols)
         stone = board[cell]
