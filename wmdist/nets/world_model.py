@@ -5,8 +5,10 @@ PlaNet and Dreamer both build it from their configs.
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Protocol
 
+import numpy as np
 import torch
 from torch import nn
 
@@ -15,7 +17,9 @@ from wmdist.nets.conv import ConvDecoder, ConvEncoder
 from wmdist.nets.dists import symlog
 from wmdist.nets.latent_layers import Heads, Latent
 from wmdist.nets.mlp import mlp
-from wmdist.nets.rssm import RSSM, RSSMConfig
+from wmdist.nets.rssm import RSSM, RSSMConfig, RSSMSettings
+
+Weights = dict[str, np.ndarray]  # as `wmdist.algos.base.Weights` (nets does not import algos)
 
 
 class WorldModelConfig(RSSMConfig, Protocol):
@@ -78,6 +82,21 @@ class WorldModel(nn.Module):
         x = obs.float()
         return symlog(x) if self.cfg.symlog_targets else x
 
+    def filter_step(
+        self,
+        h: torch.Tensor,  # [E, D] h_{t-1}
+        z: Latent,  # [E] z_{t-1}
+        prev_action: torch.Tensor,  # [E, A] a_{t-1}, model space
+        obs: torch.Tensor,  # [E, *obs_shape] o_t
+        keep: torch.Tensor,  # [E, 1] 0 where o_t starts an episode (the state restarts)
+        generator: torch.Generator | None = None,
+    ) -> tuple[torch.Tensor, Latent]:
+        """One acting step of the posterior: h_t, then z_t ~ q(z_t | h_t, o_t), without gradients."""
+        rssm = self.rssm
+        h = rssm.img_step(h, z, rssm.action_part(prev_action), keep)
+        post = rssm.post(h, rssm.embed_part(self.encode(obs)))
+        return h, rssm.sample(post, generator, grad=False)
+
     def decode(self, h: torch.Tensor, z: Latent, head_out: dict[str, torch.Tensor] | None = None) -> torch.Tensor:
         """Predicted observation target for states [N] -> [N, *obs_shape] (in `obs_target` space)."""
         if self.image:
@@ -85,3 +104,30 @@ class WorldModel(nn.Module):
         if head_out is None:
             head_out = self.heads({"h": h, "z": z})
         return head_out["decoder"]
+
+
+@dataclass(frozen=True)
+class WorldModelSettings(RSSMSettings):
+    """A concrete `WorldModelConfig` for algorithms that fix some of its fields (PlaNet)."""
+
+    mlp_layers: int = 2
+    cnn_depth: int = 32
+    symlog_inputs: bool = False
+    symlog_targets: bool = False
+    reward_head: str = "mse"
+    bins: int = 255
+    cont_head: bool = False
+
+
+def world_model_weights(wm: WorldModel) -> Weights:
+    """The world model's parameters as numpy arrays under 'wm.*' (what policies load)."""
+    return {f"wm.{k}": v.detach().cpu().numpy() for k, v in wm.state_dict().items()}
+
+
+def load_world_model(wm: WorldModel, weights: Weights) -> WorldModel:
+    """Load the 'wm.*' entries of a weight snapshot into `wm` and return it."""
+    wm_sd = {k[3:]: torch.as_tensor(np.array(v)) for k, v in weights.items() if k.startswith("wm.")}
+    if not wm_sd:
+        raise ValueError("weights need 'wm.*' entries (the world model)")
+    wm.load_state_dict(wm_sd)
+    return wm

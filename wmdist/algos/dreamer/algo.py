@@ -3,11 +3,11 @@ from __future__ import annotations
 
 from wmdist.algos.base import PREDICTS_OBSERVATIONS, Algorithm, FieldSpec, Weights
 from wmdist.algos.dreamer.config import DreamerConfig
-from wmdist.algos.dreamer.learner import DreamerLearner, load_world_model
+from wmdist.algos.dreamer.learner import DreamerLearner
 from wmdist.algos.dreamer.policy import DreamerPolicy
 from wmdist.envs.env import Env
 from wmdist.envs.spec import EnvSpec
-from wmdist.nets.world_model import WorldModel
+from wmdist.nets.world_model import WorldModel, load_world_model
 
 
 class Dreamer(Algorithm):

@@ -16,11 +16,12 @@ from wmdist.algos.dreamer.nets import ActorCritic, WorldModel, action_to_model
 from wmdist.envs.spec import EnvSpec
 from wmdist.nets.dists import bernoulli_nll, twohot_bins, twohot_loss
 from wmdist.nets.optim import GuardedStep, OptimConfig
+from wmdist.nets.world_model import load_world_model, world_model_weights
 
 
 def policy_weights(wm: WorldModel, ac: ActorCritic) -> Weights:
     """World model + actor as numpy (what policies and the dream video need)."""
-    out = {f"wm.{k}": v.detach().cpu().numpy() for k, v in wm.state_dict().items()}
+    out = world_model_weights(wm)
     out.update({f"actor.{k}": v.detach().cpu().numpy() for k, v in ac.actor.state_dict().items()})
     return out
 
@@ -31,15 +32,6 @@ def load_policy_weights(wm: WorldModel, ac: ActorCritic, weights: Weights) -> No
         raise ValueError("Dreamer weights need 'wm.*' and 'actor.*' entries")
     load_world_model(wm, weights)
     ac.actor.load_state_dict(actor_sd)
-
-
-def load_world_model(wm: WorldModel, weights: Weights) -> WorldModel:
-    """Load the 'wm.*' entries of a weight snapshot into `wm` and return it."""
-    wm_sd = {k[3:]: torch.as_tensor(np.array(v)) for k, v in weights.items() if k.startswith("wm.")}
-    if not wm_sd:
-        raise ValueError("weights need 'wm.*' entries (the world model)")
-    wm.load_state_dict(wm_sd)
-    return wm
 
 
 class DreamerLearner(Learner):

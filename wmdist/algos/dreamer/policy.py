@@ -50,11 +50,8 @@ class DreamerPolicy(Policy):
         if self.h is None or self.h.shape[0] != e:
             self.reset(e)
         assert self.h is not None and self.z is not None and self.prev_action is not None
-        rssm = self.wm.rssm
         keep = torch.as_tensor(~np.asarray(first, bool), device=self.device).float().unsqueeze(-1)  # [E, 1]
-        h = rssm.img_step(self.h, self.z, rssm.action_part(self.prev_action), keep)
-        post = rssm.post(h, rssm.embed_part(self.wm.encode(obs_t)))
-        z = rssm.sample(post, self.generator, grad=False)
+        h, z = self.wm.filter_step(self.h, self.z, self.prev_action, obs_t, keep, self.generator)
         dist = self.ac.policy(h, z)
         if self.spec.discrete:
             if legal is not None:
