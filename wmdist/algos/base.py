@@ -166,6 +166,11 @@ class Algorithm(ABC):
     def make_policy(self, device: str = "cpu") -> Policy:
         ...
 
+    def check_run(self, run: Any) -> None:
+        """Raise ValueError (one line) if the run's other sections (a `RunConfig`) cannot serve
+        this algorithm's config, e.g. it needs reanalyzers and `reanalyze.num` is 0. Called
+        before anything starts."""
+
     @abstractmethod
     def make_learner(self, device: str = "cpu") -> Learner:
         ...

@@ -61,6 +61,7 @@ class Sample:
     is_weight: np.ndarray  # [B] float32, max-normalised importance weights (1 for uniform)
     keys: np.ndarray  # [B] int64: shard << 40 | slot (opaque; pass back for write-back)
     stamps: np.ndarray  # [B] int64: write id of each slot when sampled (opaque)
+    age: np.ndarray | None = None  # [B, T] int64: transitions stored after each step (`step_ages`)
 
     def as_batch(self) -> dict[str, np.ndarray]:
         """The dict `Learner.update` takes: fields plus mask and is_weight."""
@@ -89,3 +90,15 @@ def make_keys(shard: int | np.ndarray, slots: np.ndarray) -> np.ndarray:
 def split_keys(keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     keys = np.asarray(keys, dtype=np.int64)
     return keys >> KEY_SHIFT, keys & ((1 << KEY_SHIFT) - 1)
+
+
+def step_ages(newer: np.ndarray, mask: np.ndarray, shards: int) -> np.ndarray:
+    """[B, T] int64 age of each step in transitions stored after it: newer [B] real steps its
+    shard placed after the window, plus the window's own later steps, times the number of
+    shards (episodes are hashed evenly onto them; exact with one shard). Padding gets the age
+    of the window's last real step."""
+    real = np.asarray(mask).astype(bool)  # [B, T]
+    n = real.sum(1)  # [B]
+    t = np.arange(real.shape[1])[None, :]
+    within = np.maximum(n[:, None] - 1 - t, 0)  # [B, T] later steps of the same window
+    return ((np.asarray(newer, np.int64)[:, None] + within) * shards).astype(np.int64)

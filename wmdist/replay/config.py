@@ -19,6 +19,9 @@ class ReplayConfig:
     sampler: str = param("uniform", "how sequences are drawn", choices=("uniform", "prioritized"))
     priority_alpha: float = param(0.6, "priority exponent alpha: P(i) = p_i^alpha / sum p^alpha", ge=0)
     priority_beta: float = param(0.4, "importance-weight exponent beta: w_i = (N P(i))^-beta", ge=0, le=1)
+    priority_beta_anneal_samples: int = param(
+        0, "learner batches over which beta rises linearly from priority_beta to 1 (Schaul et al. 2016; "
+           "EfficientZero: 0.4 -> 1); 0 = beta stays fixed", ge=0)
     samples_per_insert: float = param(
         0.0, "sampled sequences per inserted sequence (train ratio); 0 = no limiting", ge=0)
     min_size: int = param(1000, "stored steps (real, over all shards) before sampling starts", ge=0)

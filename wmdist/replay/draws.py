@@ -24,6 +24,7 @@ class DrawPool:
         self.slots = np.zeros(0, np.int64)  # [n]
         self.stamps = np.zeros(0, np.int64)  # [n]
         self.mass = np.zeros(0, np.float64)  # [n] sampling mass of each draw when drawn
+        self.newer = np.zeros(0, np.int64)  # [n] real steps its shard placed after the draw's window
         self.keys: list[str] = []  # [n] record keys
         self.born = np.zeros(0, np.float64)  # [n] when each draw arrived (monotonic seconds)
         self.size = 0  # the shard's sequences at its latest report
@@ -44,6 +45,9 @@ class DrawPool:
         self.slots = np.concatenate([self.slots, np.asarray(draw["slots"], np.int64)])
         self.stamps = np.concatenate([self.stamps, np.asarray(draw["stamps"], np.int64)])
         self.mass = np.concatenate([self.mass, np.asarray(draw["mass"], np.float64)])
+        newer = draw.get("newer")
+        self.newer = np.concatenate([self.newer, np.zeros(len(draw["slots"]), np.int64) if newer is None
+                                     else np.asarray(newer, np.int64)])
         self.keys += list(draw["keys"])
         self.size, self.total, self.reported_at = int(draw["size"]), float(draw["total"]), now
 
@@ -53,12 +57,13 @@ class DrawPool:
         if n:
             self.take(n)
 
-    def take(self, k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[str]]:
-        """The oldest k draws -> (slots, stamps, mass, keys); they leave the pool."""
+    def take(self, k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[str], np.ndarray]:
+        """The oldest k draws -> (slots, stamps, mass, keys, newer); they leave the pool."""
         if k > len(self):
             raise ValueError(f"draw pool holds {len(self)} draws, {k} asked")
-        out = self.slots[:k], self.stamps[:k], self.mass[:k], self.keys[:k]
+        out = self.slots[:k], self.stamps[:k], self.mass[:k], self.keys[:k], self.newer[:k]
         self.slots, self.stamps, self.mass, self.keys = self.slots[k:], self.stamps[k:], self.mass[k:], self.keys[k:]
+        self.newer = self.newer[k:]
         self.born = self.born[k:]
         return out
 
@@ -100,8 +105,8 @@ class DrawPools:
 
     def take(self, B: int, rng: np.random.Generator, prefetch: bool = True):
         """B draws split over shards by their latest size / mass reports -> (shard_of, slots,
-        stamps, mass, keys, union size, union mass) with arrays [B], or None if every shard
-        is empty."""
+        stamps, mass, keys, union size, union mass, newer) with arrays [B], or None if every
+        shard is empty."""
         pools, S = self.pools, len(self.pools)
         now = self.clock()
         for p in pools:
@@ -135,11 +140,12 @@ class DrawPools:
                     if len(p) < 2 * w and s not in self.inflight:
                         self.inflight[s] = (now, self.send(s, w))
         if len(taken) == 1:  # one shard: its arrays as they are
-            s, (slots, stamps, mass, keys) = taken[0]
-            return np.full(B, s, np.int64), slots, stamps, mass, keys, n, total
+            s, (slots, stamps, mass, keys, newer) = taken[0]
+            return np.full(B, s, np.int64), slots, stamps, mass, keys, n, total, newer
         shard_of = np.concatenate([np.full(len(t[0]), s, np.int64) for s, t in taken])
         slots, stamps, mass = (np.concatenate([t[i] for _, t in taken]) for i in range(3))
-        return shard_of, slots, stamps, mass, [k for _, t in taken for k in t[3]], n, total
+        newer = np.concatenate([t[4] for _, t in taken])
+        return shard_of, slots, stamps, mass, [k for _, t in taken for k in t[3]], n, total, newer
 
     def _fill(self, shards, k: int, fresh: bool = False) -> None:
         """Add each shard's request in flight to its pool (waiting for it), or, with `fresh`,

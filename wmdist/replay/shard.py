@@ -7,6 +7,13 @@ the oldest sequence is evicted first. A write-back names (slot, stamp); if the s
 rewritten since (stamp differs) it is dropped and counted, never applied to other data.
 All methods take one lock, so a threaded actor can serve them concurrently.
 
+Age: the shard counts the real steps it has indexed (`clock`) and keeps, per slot, the
+count when its window was placed (`born`). `sample` and `draw` return `newer` per draw: the
+real steps indexed after that window. Step t of a window of n real steps then has age
+newer + (n - 1 - t) in this shard's transitions (the client turns that into [B, T] ages,
+`batch.step_ages`). Eviction is FIFO, so every step placed after a live one is live too:
+after a restart the clock is rebuilt exactly from the live slots' stamps and steps.
+
 Durable (redis) storage also takes inserts clients wrote themselves: they announce them in
 the storage's pending list and `drain()` indexes them. Every read (`sample`, `draw`, `mass`,
 `stats`, `save`) drains first, so a reader sees every insert acknowledged before its call.
@@ -52,6 +59,8 @@ class ReplayShard:
         self.priority = np.zeros(C, np.float64)  # [C] raw priorities (before alpha)
         self.tree = SumTree(C)
         self.count = 0  # sequences ever written (next write id)
+        self.born = np.zeros(C, np.int64)  # [C] the clock when the slot's window was placed
+        self.clock = 0  # real steps placed in this shard (the age clock)
         self.max_priority = 1.0
         self.counters = {"inserts": 0, "samples": 0, **{f"drops_{r}": 0 for r in DROP_REASONS}}
         if getattr(self.storage, "durable", False):
@@ -76,9 +85,23 @@ class ReplayShard:
             self.tree = SumTree(self.capacity)
             slots = np.flatnonzero(live)
             self.tree.set(slots, self._mass(self.priority[slots]))
+            self._rebuild_clock()
             for reason, n in drops.items():
                 self.counters[f"drops_{reason}"] += n
             self.drain()  # inserts acknowledged but not yet indexed when the shard stopped
+
+    def _rebuild_clock(self) -> None:
+        """born / clock from the live slots in write order (exact: eviction is FIFO)."""
+        live = np.flatnonzero(self.stamp >= 0)
+        order = live[np.argsort(self.stamp[live], kind="stable")]
+        steps = self.steps[order]
+        self.born[order] = np.cumsum(steps) - steps
+        self.clock = int(steps.sum())
+
+    def newer(self, slots: np.ndarray) -> np.ndarray:
+        """[k] real steps placed after each slot's window (its last step's age)."""
+        slots = np.asarray(slots, np.int64)
+        return (self.clock - self.born[slots] - self.steps[slots]).astype(np.int64)
 
     @property
     def size_sequences(self) -> int:
@@ -177,6 +200,8 @@ class ReplayShard:
         self.counters["drops_evicted"] += evicted
         self.stamp[slots], self.version[slots], self.episode[slots] = ids, version, episode
         self.steps[slots], self.priority[slots] = steps, prio
+        self.born[slots] = self.clock + np.cumsum(steps) - steps  # windows in write order
+        self.clock += int(steps.sum())
         self.tree.set(slots, self._mass(prio))
         self.count += n
         self.counters["inserts"] += n
@@ -219,7 +244,8 @@ class ReplayShard:
             w = is_weights(self.tree.get(slots), global_count or self.size_sequences,
                            global_mass or self.tree.total, beta if self.prioritized else 0.0)
             self.counters["samples"] += k
-            out.update(is_weight=w.astype(np.float32), slots=slots, stamps=self.stamp[slots].copy())
+            out.update(is_weight=w.astype(np.float32), slots=slots, stamps=self.stamp[slots].copy(),
+                       newer=self.newer(slots))
             return out
 
     def draw(self, k: int) -> dict:
@@ -235,7 +261,7 @@ class ReplayShard:
             self.counters["samples"] += slots.size
             keys = self.storage.key_of(slots) if self.storage.durable else []  # memory: nothing to fetch by key
             return {"slots": slots, "stamps": self.stamp[slots].copy(), "keys": keys,
-                    "mass": self.tree.get(slots), "size": size, "total": total}
+                    "mass": self.tree.get(slots), "size": size, "total": total, "newer": self.newer(slots)}
 
     def _drop(self, slots: np.ndarray) -> None:
         self.counters["drops_corrupt"] += slots.size
@@ -341,6 +367,7 @@ class ReplayShard:
             self.tree = SumTree(self.capacity)
             live = np.flatnonzero(self.stamp >= 0)
             self.tree.set(live, self._mass(self.priority[live]))
+            self._rebuild_clock()
 
     def close(self) -> None:
         self.storage.close()

@@ -37,6 +37,7 @@ def check_env_and_algo(cfg: RunConfig) -> tuple[EnvSpec, Any]:
     spec = env_spec_or_error(cfg)
     try:
         algo = build_algorithm(cfg, spec, cfg.run.seed)
+        algo.check_run(cfg)
     except (ValueError, TypeError) as err:
         raise ConfigError(_first_line(err)) from None
     return spec, algo

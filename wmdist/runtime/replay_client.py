@@ -30,7 +30,7 @@ import ray
 from ray.exceptions import RayActorError
 
 from wmdist.algos.base import FieldSpec
-from wmdist.replay.batch import Sample, SequenceBatch, make_keys, split_keys
+from wmdist.replay.batch import Sample, SequenceBatch, make_keys, split_keys, step_ages
 from wmdist.replay.coalesce import Coalescer
 from wmdist.replay.config import ReplayConfig
 from wmdist.replay.draws import DrawPools, is_weights
@@ -88,6 +88,7 @@ class ReplayClient:
         self._gen, self._pool_gen = 0, 0
         self._layout = None  # the fields' RecordLayout (redis), built on first use
         self._draw_lock: threading.Lock | None = None
+        self._batches = 0  # rate-limited (learner) batches this copy sampled: anneals beta
 
     def __getstate__(self) -> dict:
         state = dict(self.__dict__)
@@ -202,6 +203,7 @@ class ReplayClient:
                 return None
         except RayActorError:
             return None
+        self._batches += int(limited)
         try:
             return self._sample_direct(batch_size, limited) if self.direct else self._sample(batch_size)
         except RayActorError:
@@ -244,11 +246,16 @@ class ReplayClient:
             keys=make_keys(np.concatenate([np.full(len(g["slots"]), i) for (i, _), g in zip(parts, got)]),
                            np.concatenate([g["slots"] for g in got])),
             stamps=np.concatenate([g["stamps"] for g in got]),
+            age=step_ages(np.concatenate([g["newer"] for g in got]), np.concatenate([g["mask"] for g in got]), S),
         )
 
     @property
     def _beta(self) -> float:
-        return self.cfg.priority_beta if self.cfg.sampler == "prioritized" else 0.0
+        """Prioritized: beta annealed linearly to 1 over `priority_beta_anneal_samples` batches."""
+        if self.cfg.sampler != "prioritized":
+            return 0.0
+        b0, span = self.cfg.priority_beta, self.cfg.priority_beta_anneal_samples
+        return b0 if span <= 0 else b0 + (1.0 - b0) * min(1.0, self._batches / span)
 
     def _sample_direct(self, batch_size: int, limited: bool) -> Sample | None:
         """Redis backend: draws from the pools (no shard round trip when the prefetched draws
@@ -261,12 +268,13 @@ class ReplayClient:
                 if not limited:
                     return None
                 raise ValueError("replay is empty (min_size 0 and nothing inserted)")
-            shard_of, slots, stamps, mass, keys, n, total = got
+            shard_of, slots, stamps, mass, keys, n, total, newer = got
             w = is_weights(mass, n, total, self._beta)
-            data, mask = self._fetch_direct(keys, shard_of, slots, stamps, w, n, total)
+            data, mask = self._fetch_direct(keys, shard_of, slots, stamps, w, n, total, newer)
         return Sample(data=data, mask=mask.astype(np.float32),
                       is_weight=(w / w.max()).astype(np.float32),  # normalised by the batch max
-                      keys=make_keys(shard_of, slots), stamps=stamps)
+                      keys=make_keys(shard_of, slots), stamps=stamps,
+                      age=step_ages(newer, mask, len(self.shards)))
 
     def _take_draws(self, B: int):
         """B draws from the per-shard pools (`draws.DrawPools`: a shard call on this path only
@@ -282,7 +290,7 @@ class ReplayClient:
             self._pool_gen = self._gen
         return self._draws.take(B, self.rng, prefetch=steady)
 
-    def _fetch_direct(self, keys, shard_of, slots, stamps, w, n, total):
+    def _fetch_direct(self, keys, shard_of, slots, stamps, w, n, total, newer):
         """One MGET of the drawn records. Rows whose record is gone or undecodable are reported
         to their shard (which drops and counts them unless the slot was rewritten since the
         draw, i.e. evicted) and drawn again from the same shard."""
@@ -305,7 +313,7 @@ class ReplayClient:
                 for f in self.fields:
                     data[f][rows] = d2[f]
                 mask[rows] = m2
-                slots[rows], stamps[rows] = g["slots"], g["stamps"]
+                slots[rows], stamps[rows], newer[rows] = g["slots"], g["stamps"], g["newer"]
                 w[rows] = is_weights(g["mass"], n, total, self._beta)
                 again.append(rows[np.union1d(miss2, corr2)])
             redo = np.concatenate(again)

@@ -17,6 +17,9 @@ class MuZero(Algorithm):
     Config = MuZeroConfig
     # acts by MCTS; Reanalyze reruns that search on stored data; board games search for `to_play`
     capabilities = frozenset({PLANS, REANALYZE, TWO_PLAYER})
+    # the parts a subclass (EfficientZero) swaps for its own
+    policy_cls, learner_cls, reanalyzer_cls = MuZeroPolicy, MuZeroLearner, MuZeroReanalyzer
+    build = staticmethod(build_net)
 
     def __init__(self, spec, config: MuZeroConfig | None = None, seed: int = 0) -> None:
         super().__init__(spec, config if config is not None else MuZeroConfig(), seed)
@@ -37,14 +40,14 @@ class MuZero(Algorithm):
         import torch
 
         torch.manual_seed(self.seed)  # every process builds the same initial weights
-        return build_net(self.spec, self.config)
+        return self.build(self.spec, self.config)
 
     def make_policy(self, device: str = "cpu") -> MuZeroPolicy:
-        return MuZeroPolicy(self._net(), self.config, self.spec, self.seed + 1, device)
+        return self.policy_cls(self._net(), self.config, self.spec, self.seed + 1, device)
 
     def make_learner(self, device: str = "cpu") -> MuZeroLearner:
-        return MuZeroLearner(self._net(), self.config, self.spec.num_actions, self.spec.players, self.seed + 2, device,
-                             symmetries=self.spec.symmetries)
+        return self.learner_cls(self._net(), self.config, self.spec.num_actions, self.spec.players, self.seed + 2,
+                                device, symmetries=self.spec.symmetries)
 
     def make_reanalyzer(self, device: str = "cpu") -> MuZeroReanalyzer:
-        return MuZeroReanalyzer(self._net(), self.config, self.spec, self.seed + 3, device)
+        return self.reanalyzer_cls(self._net(), self.config, self.spec, self.seed + 3, device)

@@ -53,6 +53,9 @@ class MuZeroConfig:
     temperature_moves: int = param(0, "board games: moves per episode at temperature 1 before playing greedily (0 = use the env-step schedule)", ge=0)
 
     def validate(self) -> "MuZeroConfig":
+        if self.search.value_prefix and not self.has_value_prefix_net():
+            raise ValueError("algo.search.value_prefix needs a network with a value-prefix head (LSTM); "
+                             "muzero's has none (use algo.name: efficientzero)")
         if len(self.visit_temperatures) != len(self.temperature_env_steps) + 1:
             raise ValueError(
                 f"algo.visit_temperatures needs one more entry than algo.temperature_env_steps, got "
@@ -64,3 +67,7 @@ class MuZeroConfig:
         if not self.hidden or any(int(w) < 1 for w in self.hidden):
             raise ValueError(f"algo.hidden must be a non-empty list of positive widths, got {self.hidden}")
         return self
+
+    def has_value_prefix_net(self) -> bool:
+        """Whether the network this config builds predicts value prefixes (EfficientZero's LSTM)."""
+        return False

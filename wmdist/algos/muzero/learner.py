@@ -11,7 +11,7 @@ import torch
 from wmdist.algos.base import Batch, Learner, UpdateResult, Weights
 from wmdist.algos.muzero.build import to_numpy_weights
 from wmdist.algos.muzero.config import MuZeroConfig
-from wmdist.algos.muzero.losses import LossTargets, LossWeights, unroll_loss
+from wmdist.algos.muzero.losses import LossOut, LossTargets, LossWeights, unroll_loss
 from wmdist.algos.muzero.networks import MuZeroNet
 from wmdist.algos.muzero.symmetry import Symmetries
 from wmdist.algos.muzero.targets import UnrollTargets, make_targets, sample_starts
@@ -62,6 +62,21 @@ class MuZeroLearner(Learner):
             values[r, c] = support_to_scalar(v_logits.float(), self.cfg.value_support).cpu().numpy()
         return values
 
+    # -- the parts a subclass (EfficientZero) replaces ------------------------------------
+    def _value_targets(self, batch: Batch, tg: UnrollTargets) -> np.ndarray:
+        """[B, K+1] value targets z (n-step returns, Eq. 4)."""
+        return tg.value_target(self._bootstrap_values(batch, tg))
+
+    def _reward_targets(self, tg: UnrollTargets) -> np.ndarray:
+        """[B, K+1] targets of the reward head (column 0 unused)."""
+        return tg.reward
+
+    def _losses(self, obs0: torch.Tensor, lt: LossTargets, batch: Batch, tg: UnrollTargets,
+                valid: np.ndarray) -> tuple[LossOut, torch.Tensor, dict[str, float]]:
+        """(the unroll's LossOut, per-sample loss [B], extra metrics)."""
+        out = unroll_loss(self.net, obs0, lt, self.weights, self.cfg.value_support, self.cfg.reward_support)
+        return out, out.per_sample, {}
+
     def update(self, batch: Batch) -> UpdateResult:
         missing = [k for k in REQUIRED if k not in batch]
         if missing:
@@ -70,7 +85,7 @@ class MuZeroLearner(Learner):
         self.net.train()
         t0, valid = sample_starts(batch["mask"], batch["last"], self.rng)
         tg = make_targets(batch, t0, valid, cfg.unroll_steps, cfg.td_steps, self.gamma, self.num_actions, self.rng)
-        z = tg.value_target(self._bootstrap_values(batch, tg))  # [B, K+1]
+        z = self._value_targets(batch, tg)  # [B, K+1]
         rows = np.arange(len(t0))
         obs0, actions, policy = batch["obs"][rows, t0], tg.actions, tg.policy
         if self.symmetries is not None:
@@ -78,15 +93,15 @@ class MuZeroLearner(Learner):
             obs0, actions, policy = self.symmetries.apply(g, obs0, actions, policy)
         lt = LossTargets(
             actions=self._tensor(actions), value=self._tensor(z), value_w=self._tensor(tg.value_w),
-            reward=self._tensor(tg.reward), reward_w=self._tensor(tg.reward_w),
+            reward=self._tensor(self._reward_targets(tg)), reward_w=self._tensor(tg.reward_w),
             policy=self._tensor(policy), policy_w=self._tensor(tg.policy_w),
         )
         obs0 = self._tensor(obs0)
         is_w = self._tensor(batch["is_weight"], torch.float32) * self._tensor(valid, torch.float32)  # [B]
         amp = torch.autocast("cpu", dtype=torch.bfloat16) if cfg.bf16 else contextlib.nullcontext()
         with amp:
-            out = unroll_loss(self.net, obs0, lt, self.weights, cfg.value_support, cfg.reward_support)
-        loss = (out.per_sample.float() * is_w).mean()
+            out, per_sample, extra = self._losses(obs0, lt, batch, tg, valid)
+        loss = (per_sample.float() * is_w).mean()
         grad_norm = self.step(loss)  # raises NonFiniteLoss before anything changes
         self.updates += 1
         if cfg.bootstrap == "target" and self.updates % cfg.target_update_every == 0:
@@ -95,7 +110,7 @@ class MuZeroLearner(Learner):
         metrics = {
             "loss": float(loss.detach()), "value_loss": float(out.value_loss), "reward_loss": float(out.reward_loss),
             "policy_loss": float(out.policy_loss), "grad_norm": grad_norm, "value_error": float(err[valid].mean()) if valid.any() else 0.0,
-            "value_target": float(z[valid, 0].mean()) if valid.any() else 0.0,
+            "value_target": float(z[valid, 0].mean()) if valid.any() else 0.0, **extra,
         }
         return UpdateResult(metrics, priorities=(err + cfg.priority_eps).astype(np.float32))
 

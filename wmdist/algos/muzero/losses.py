@@ -10,7 +10,8 @@ Weight decay (the c||theta||^2 term) lives in the optimiser.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from typing import Callable
 
 import torch
 from torch.nn import functional as F
@@ -47,6 +48,11 @@ class LossOut:
     reward_loss: torch.Tensor
     policy_loss: torch.Tensor
     value0: torch.Tensor  # [B] predicted scalar value at k = 0 (detached; for priorities)
+    latents: list[torch.Tensor] = field(default_factory=list)  # K x [B, *latent]: s^1..s^K (with gradient)
+
+
+# (latent s^{k-1}, action a^k [B], k) -> (s^k, reward logits, policy logits, value logits)
+StepFn = Callable[[torch.Tensor, torch.Tensor, int], tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]]
 
 
 def _ce(logits: torch.Tensor, target_probs: torch.Tensor) -> torch.Tensor:
@@ -61,7 +67,12 @@ def unroll_loss(
     weights: LossWeights,
     value_support: int,
     reward_support: int,
+    step: StepFn | None = None,
 ) -> LossOut:
+    """`step` replaces `net.recurrent_inference` in the unroll (EfficientZero: an LSTM
+    value-prefix head carries its state along; its "reward" logits are the prefix's)."""
+    if step is None:
+        step = lambda s, a, k: net.recurrent_inference(s, a)  # noqa: E731
     k_steps = tgt.actions.shape[1]
     latent, policy_logits, value_logits = net.initial_inference(obs)
     value0 = support_to_scalar(value_logits.detach().float(), value_support)
@@ -70,12 +81,14 @@ def unroll_loss(
     lv = _ce(value_logits, value_t[:, 0]) * tgt.value_w[:, 0]
     lp = _ce(policy_logits, tgt.policy[:, 0]) * tgt.policy_w[:, 0]
     lr = torch.zeros_like(lv)
+    latents = []
     for k in range(1, k_steps + 1):
         latent = scale_gradient(latent, weights.dynamics_grad_scale)
-        latent, reward_logits, policy_logits, value_logits = net.recurrent_inference(latent, tgt.actions[:, k - 1])
+        latent, reward_logits, policy_logits, value_logits = step(latent, tgt.actions[:, k - 1], k)
+        latents.append(latent)
         c = 1.0 / k_steps
         lv = lv + c * _ce(value_logits, value_t[:, k]) * tgt.value_w[:, k]
         lr = lr + c * _ce(reward_logits, reward_t[:, k]) * tgt.reward_w[:, k]
         lp = lp + c * _ce(policy_logits, tgt.policy[:, k]) * tgt.policy_w[:, k]
     per_sample = weights.value * lv + weights.reward * lr + weights.policy * lp
-    return LossOut(per_sample, lv.mean().detach(), lr.mean().detach(), lp.mean().detach(), value0)
+    return LossOut(per_sample, lv.mean().detach(), lr.mean().detach(), lp.mean().detach(), value0, latents)

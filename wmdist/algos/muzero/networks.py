@@ -34,13 +34,19 @@ class MuZeroNet(nn.Module):
     """Common interface of the MuZero networks (latents are tensors with batch first)."""
 
     num_actions: int
+    has_value_prefix: bool = False  # EfficientZero's LSTM value-prefix head (searcher: recurrent_fn takes `reset`)
 
     def represent(self, obs: torch.Tensor) -> torch.Tensor:  # [B, *obs] -> [B, *latent]
         raise NotImplementedError
 
+    def transition(self, latent: torch.Tensor, action: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """([B, *latent], [B] int64) -> (next latent [B, *latent], the features the reward head reads)."""
+        raise NotImplementedError
+
     def dynamics(self, latent: torch.Tensor, action: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """([B, *latent], [B] int64) -> (next latent [B, *latent], reward logits [B, 2Sr+1])."""
-        raise NotImplementedError
+        nxt, features = self.transition(latent, action)
+        return nxt, self.reward_head(features)
 
     def predict(self, latent: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """[B, *latent] -> (policy logits [B, A], value logits [B, 2Sv+1])."""
@@ -84,11 +90,11 @@ class MLPNet(MuZeroNet):
     def represent(self, obs: torch.Tensor) -> torch.Tensor:
         return scale_latent(self.repr_net(obs.flatten(1).float()))  # [B, D]
 
-    def dynamics(self, latent: torch.Tensor, action: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    def transition(self, latent: torch.Tensor, action: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         a = F.one_hot(action.long(), self.num_actions).to(latent.dtype)  # [B, A]
         nxt = scale_latent(self.dyn_net(torch.cat([latent, a], dim=-1)))  # [B, D]
         # The reward of the transition is read from the new state (as in muzero-general's MLP).
-        return nxt, self.reward_head(nxt)
+        return nxt, nxt
 
     def predict(self, latent: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         return self.policy_head(latent), self.value_head(latent)

@@ -68,14 +68,13 @@ class ConvNet(MuZeroNet):
         x = obs.permute(0, 3, 1, 2).float() / 255.0  # [B, C, H, W] in [0, 1]
         return scale_latent(self.repr_tower(self.down(x)))  # [B, C, h, w]
 
-    def dynamics(self, latent: torch.Tensor, action: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    def transition(self, latent: torch.Tensor, action: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         b, _, hh, ww = latent.shape
         planes = F.one_hot(action.long(), self.num_actions).to(latent.dtype)  # [B, A]
         planes = planes[:, :, None, None].expand(b, self.num_actions, hh, ww)  # [B, A, h, w]
         x = F.relu(self.dyn_bn(self.dyn_conv(torch.cat([latent, planes], dim=1))))
         x = self.dyn_tower(x)
-        nxt = scale_latent(x)
-        return nxt, self.reward_head(x)
+        return scale_latent(x), x  # the reward head reads the tower's output before scaling
 
     def predict(self, latent: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         x = self.pred_tower(latent)

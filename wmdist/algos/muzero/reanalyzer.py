@@ -32,6 +32,20 @@ class MuZeroReanalyzer(Reanalyzer):
         self.net.eval()
         self.version = version
 
+    def search_at(self, batch: Batch, r: np.ndarray, c: np.ndarray, add_noise: bool) -> tuple[np.ndarray, np.ndarray]:
+        """Search the stored observations at rows r, steps c ([N] each) -> (policy targets
+        [N, A], root values [N]), in chunks of `max_roots`."""
+        a = self.spec.num_actions
+        policy, value = np.zeros((len(r), a), np.float32), np.zeros(len(r), np.float32)
+        for lo in range(0, len(r), self.max_roots):
+            rr, cc = r[lo:lo + self.max_roots], c[lo:lo + self.max_roots]
+            legal = batch["legal"][rr, cc].astype(bool) if "legal" in batch else np.ones((len(rr), a), bool)
+            to_play = batch["to_play"][rr, cc].astype(np.int64) if self.two_player and "to_play" in batch else None
+            res = self.searcher.run(batch["obs"][rr, cc], legal, to_play, self.rng, add_noise=add_noise)
+            policy[lo:lo + len(rr)] = res.policy_target
+            value[lo:lo + len(rr)] = res.root_value
+        return policy, value
+
     def reanalyze(self, batch: Batch) -> dict[str, np.ndarray]:
         for k in ("obs", "mask", "last", "search_policy", "search_value"):
             if k not in batch:
@@ -40,15 +54,8 @@ class MuZeroReanalyzer(Reanalyzer):
         policy = np.zeros_like(batch["search_policy"], dtype=np.float32)  # [B, T, A]
         value = np.zeros_like(batch["search_value"], dtype=np.float32)  # [B, T]
         r, c = np.nonzero(acting)
-        a = self.spec.num_actions
-        for lo in range(0, len(r), self.max_roots):
-            rr, cc = r[lo:lo + self.max_roots], c[lo:lo + self.max_roots]
-            legal = batch["legal"][rr, cc].astype(bool) if "legal" in batch else np.ones((len(rr), a), bool)
-            to_play = batch["to_play"][rr, cc].astype(np.int64) if self.two_player and "to_play" in batch else None
-            # Root noise as in self-play (reanalyze_noise): the stored targets came from noised
-            # searches too, and a noise-free search on a peaked prior can put every visit on one
-            # action, so the policy target sharpens the prior further until it collapses.
-            res = self.searcher.run(batch["obs"][rr, cc], legal, to_play, self.rng, add_noise=self.cfg.reanalyze_noise)
-            policy[rr, cc] = res.policy_target
-            value[rr, cc] = res.root_value
+        # Root noise as in self-play (reanalyze_noise): the stored targets came from noised
+        # searches too, and a noise-free search on a peaked prior can put every visit on one
+        # action, so the policy target sharpens the prior further until it collapses.
+        policy[r, c], value[r, c] = self.search_at(batch, r, c, add_noise=self.cfg.reanalyze_noise)
         return {"search_policy": policy, "search_value": value}

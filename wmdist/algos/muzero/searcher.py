@@ -33,6 +33,24 @@ class Searcher:
         self.two_player = two_player
         self.device = device
         self._net_seconds = 0.0
+        if cfg.value_prefix and not net.has_value_prefix:
+            raise ValueError("algo.search.value_prefix needs a network with a value-prefix head (algo.name: efficientzero)")
+
+    def _recurrent_prefix(self, latents: tuple, actions: np.ndarray, reset: np.ndarray):
+        """Value-prefix mode: latents are (s [B, *latent], h [B, H], c [B, H]); the LSTM state
+        starts from zeros where `reset` [B] (the parent's depth is a multiple of the horizon)."""
+        t = time.perf_counter()
+        with torch.no_grad():
+            s, h, c = latents
+            keep = torch.as_tensor(~np.asarray(reset, bool), device=self.device)[:, None].to(h.dtype)  # [B, 1]
+            a = torch.as_tensor(np.asarray(actions), dtype=torch.int64, device=self.device)
+            nxt, (h2, c2), prefix_logits, p_logits, v_logits = self.net.recurrent_inference_prefix(
+                s, a, (h * keep, c * keep))
+            prefix = support_to_scalar(prefix_logits.float(), self.reward_support).cpu().numpy()
+            value = support_to_scalar(v_logits.float(), self.value_support).cpu().numpy()
+            logits = p_logits.float().cpu().numpy()
+        self._net_seconds += time.perf_counter() - t
+        return prefix, value, logits, (nxt, h2, c2)
 
     def _recurrent(self, latents: torch.Tensor, actions: np.ndarray):
         t = time.perf_counter()
@@ -55,7 +73,10 @@ class Searcher:
         root_value = support_to_scalar(v_logits.float(), self.value_support).cpu().numpy()
         root_logits = p_logits.float().cpu().numpy()
         self._net_seconds += time.perf_counter() - start
-        out = search(latent, root_logits, root_value, legal, to_play, self._recurrent, self.cfg, rng,
+        fn = self._recurrent
+        if self.cfg.value_prefix:  # the LSTM state lives with each node's latent in the tree
+            latent, fn = (latent, *self.net.initial_state(len(obs_t), self.device)), self._recurrent_prefix
+        out = search(latent, root_logits, root_value, legal, to_play, fn, self.cfg, rng,
                      temperature=temperature, add_noise=add_noise, two_player=self.two_player)
         counts = np.asarray(out.visit_counts, dtype=np.float32)
         if self.cfg.gumbel:

@@ -83,7 +83,7 @@ def make_targets(
     t0: np.ndarray,  # [B] start indices (acting steps)
     valid: np.ndarray,  # [B] bool rows that have a start at all
     unroll_steps: int,
-    td_steps: int,
+    td_steps: int | np.ndarray,  # n, or [B, 1] / [B, K+1] per-position n (EfficientZero's corrected horizon)
     gamma: float,  # discount; negative for alternating two-player games
     num_actions: int,
     rng: np.random.Generator,
@@ -103,7 +103,7 @@ def make_targets(
     m = np.minimum(td_steps, e[:, None] - pos)  # [B, K+1]
     partial = np.zeros((b, k1), np.float64)
     disc = np.ones((b, k1), np.float64)
-    for j in range(1, td_steps + 1):
+    for j in range(1, int(np.max(td_steps, initial=1)) + 1):
         use = acting & (j <= m)
         r = reward_all[rows, np.clip(pos + j, 0, t - 1)]
         partial += np.where(use, disc * r, 0.0)

@@ -35,6 +35,8 @@ class ReanalyzerRole:
             return {"reanalyzed": 0, "busy_seconds": time.monotonic() - t0, "version": self.version,
                 **self.tag}
         batch = dict(sample.data, mask=sample.mask, is_weight=sample.is_weight)
+        if sample.age is not None:  # transitions stored after each step (EfficientZero's correction)
+            batch["age"] = sample.age
         fields = self.reanalyzer.reanalyze(batch)
         self.replay.write_back(sample.keys, sample.stamps, fields)
         n = len(sample.mask)
