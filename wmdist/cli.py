@@ -70,7 +70,7 @@ def _parser() -> argparse.ArgumentParser:
     d.add_argument("--out", default=None, help="output GIF (default RUN_DIR/dream.gif)")
     d.add_argument("--horizon", type=int, default=45)
 
-    b = sub.add_parser("bench", help="run a benchmark (mcts, replay, selfplay, dreamer, envs, all; soak by name)",
+    b = sub.add_parser("bench", help="run a benchmark (mcts, replay, selfplay, dreamer, envs, planner, all; soak by name)",
                        description="Each measured case prints one JSON object per line with --json.")
     b.add_argument("name")
     b.add_argument("--json", action="store_true", help="one JSON object per line (default: a table)")

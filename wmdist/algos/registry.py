@@ -8,6 +8,7 @@ from wmdist.algos.base import Algorithm
 ALGORITHMS: dict[str, str] = {
     "muzero": "wmdist.algos.muzero:MuZero",
     "dreamer": "wmdist.algos.dreamer:Dreamer",
+    "planet": "wmdist.algos.planet:PlaNet",
     "efficientzero": "wmdist.algos.efficientzero:EfficientZero",
 }
 

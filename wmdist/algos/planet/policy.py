@@ -1,0 +1,67 @@
+"""PlaNet's acting policy: filter each env's observation through the RSSM, then plan with CEM
+for all E envs at once (one batched planning call per step).
+
+Collecting (explore=True) adds N(0, expl_noise) to the planned action (PlaNet: 0.3) and
+clips it to the bounds; the evaluator (explore=False) takes the planned action as is.
+"""
+from __future__ import annotations
+
+import numpy as np
+import torch
+
+from wmdist.algos.base import Policy, Weights
+from wmdist.algos.planet.config import PlaNetConfig
+from wmdist.algos.planet.planning import reward_sum_fn
+from wmdist.envs.spec import EnvSpec
+from wmdist.nets.actions import action_to_env
+from wmdist.nets.latent_layers import Latent
+from wmdist.nets.world_model import WorldModel, load_world_model
+from wmdist.search.cem import cem_plan, shift_plan
+
+
+class PlaNetPolicy(Policy):
+    """Carries (h, z, previous action, previous plan) per env; resets rows where `first`."""
+
+    def __init__(self, cfg: PlaNetConfig, spec: EnvSpec, device: str = "cpu", seed: int = 0) -> None:
+        self.cfg, self.spec, self.device = cfg, spec, torch.device(device)
+        self.wm = WorldModel(cfg.world_model(), spec).to(self.device).eval()
+        self.generator = torch.Generator(self.device).manual_seed(seed)
+        self.version = -1
+        self.h: torch.Tensor | None = None  # [E, D]
+        self.z: Latent | None = None
+        self.prev_action: torch.Tensor | None = None  # [E, A] model space
+        self.plan: torch.Tensor | None = None  # [E, H, A] the last plan (warm start)
+
+    def set_weights(self, weights: Weights, version: int) -> None:
+        load_world_model(self.wm, weights)
+        self.version = version
+
+    def reset(self, num_envs: int) -> None:
+        self.h, self.z = self.wm.rssm.initial(num_envs, self.device)
+        self.prev_action = torch.zeros(num_envs, self.spec.action_dim, device=self.device)
+        self.plan = None
+
+    @torch.no_grad()
+    def act(self, obs, first, legal, to_play, explore):  # type: ignore[override]
+        obs_t = torch.as_tensor(np.array(obs), device=self.device)
+        e = obs_t.shape[0]
+        if self.h is None or self.h.shape[0] != e:
+            self.reset(e)
+        assert self.h is not None and self.z is not None and self.prev_action is not None
+        restart = torch.as_tensor(np.asarray(first, bool), device=self.device)  # [E]
+        keep = (~restart).float().unsqueeze(-1)  # [E, 1]
+        h, z = self.wm.filter_step(self.h, self.z, self.prev_action, obs_t, keep, self.generator)
+        a_dim, planner = self.spec.action_dim, self.cfg.planner
+        low = torch.full((e, a_dim), -1.0, device=self.device)  # model space: every bound maps to [-1, 1]
+        high = torch.ones_like(low)
+        init = None
+        if planner.warm_start and self.plan is not None:
+            init = shift_plan(self.plan, low, high)
+            init[restart] = 0.0  # a new episode starts from the fresh Gaussian
+        result = cem_plan(reward_sum_fn(self.wm, h, z, self.generator), low, high, planner, self.generator, init)
+        action = result.action  # [E, A]
+        if explore and self.cfg.expl_noise > 0:
+            noise = torch.randn(action.shape, generator=self.generator, device=self.device)
+            action = (action + self.cfg.expl_noise * noise).clamp(-1, 1)
+        self.h, self.z, self.prev_action, self.plan = h, z, action, result.mean
+        return action_to_env(action, self.spec), {}
