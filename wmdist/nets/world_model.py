@@ -34,6 +34,18 @@ class WorldModelConfig(RSSMConfig, Protocol):
     cont_head: bool  # learn a continue head
 
 
+def check_spec(spec: EnvSpec, who: str) -> None:
+    """One-line ValueError unless `spec` suits the world model: one player, flat vectors or 64x64 images."""
+    if spec.players != 1:
+        raise ValueError(f"{who} supports single-player envs only, {spec.id} has {spec.players} players")
+    if spec.obs_kind == "image" and tuple(spec.obs_shape[:2]) != (64, 64):
+        raise ValueError(f"{who} needs 64x64 image observations, {spec.id} gives {spec.obs_shape}")
+    if spec.obs_kind == "vector" and len(spec.obs_shape) != 1:
+        raise ValueError(f"{who} needs flat vector observations, {spec.id} gives {spec.obs_shape}")
+    if spec.obs_kind not in ("vector", "image"):
+        raise ValueError(f"unknown obs_kind {spec.obs_kind!r} for {spec.id}")
+
+
 def head_width(kind: str, cfg: WorldModelConfig) -> int:
     return cfg.bins if kind == "twohot" else 1
 

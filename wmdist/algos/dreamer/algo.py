@@ -7,7 +7,7 @@ from wmdist.algos.dreamer.learner import DreamerLearner
 from wmdist.algos.dreamer.policy import DreamerPolicy
 from wmdist.envs.env import Env
 from wmdist.envs.spec import EnvSpec
-from wmdist.nets.world_model import WorldModel, load_world_model
+from wmdist.nets.world_model import WorldModel, check_spec, load_world_model
 
 
 class Dreamer(Algorithm):
@@ -21,15 +21,7 @@ class Dreamer(Algorithm):
         self.validate()
 
     def validate(self) -> None:
-        s = self.spec
-        if s.players != 1:
-            raise ValueError(f"Dreamer supports single-player envs only, {s.id} has {s.players} players")
-        if s.obs_kind == "image" and tuple(s.obs_shape[:2]) != (64, 64):
-            raise ValueError(f"Dreamer needs 64x64 image observations, {s.id} gives {s.obs_shape}")
-        if s.obs_kind == "vector" and len(s.obs_shape) != 1:
-            raise ValueError(f"Dreamer needs flat vector observations, {s.id} gives {s.obs_shape}")
-        if s.obs_kind not in ("vector", "image"):
-            raise ValueError(f"unknown obs_kind {s.obs_kind!r} for {s.id}")
+        check_spec(self.spec, "Dreamer")
 
     def extra_fields(self) -> dict[str, FieldSpec]:
         return {}  # the RSSM state is recomputed from the sequence; nothing extra is stored

@@ -7,7 +7,7 @@ from wmdist.algos.planet.learner import PlaNetLearner
 from wmdist.algos.planet.policy import PlaNetPolicy
 from wmdist.envs.env import Env
 from wmdist.envs.spec import EnvSpec
-from wmdist.nets.world_model import WorldModel, load_world_model
+from wmdist.nets.world_model import WorldModel, check_spec, load_world_model
 
 
 class PlaNet(Algorithm):
@@ -26,14 +26,7 @@ class PlaNet(Algorithm):
         s = self.spec
         if s.discrete:
             raise ValueError(f"PlaNet's CEM planner needs continuous actions, {s.id} has {s.num_actions} discrete actions")
-        if s.players != 1:
-            raise ValueError(f"PlaNet supports single-player envs only, {s.id} has {s.players} players")
-        if s.obs_kind == "image" and tuple(s.obs_shape[:2]) != (64, 64):
-            raise ValueError(f"PlaNet needs 64x64 image observations, {s.id} gives {s.obs_shape}")
-        if s.obs_kind == "vector" and len(s.obs_shape) != 1:
-            raise ValueError(f"PlaNet needs flat vector observations, {s.id} gives {s.obs_shape}")
-        if s.obs_kind not in ("vector", "image"):
-            raise ValueError(f"unknown obs_kind {s.obs_kind!r} for {s.id}")
+        check_spec(s, "PlaNet")
 
     def extra_fields(self) -> dict[str, FieldSpec]:
         return {}  # the RSSM state is recomputed from the sequence
