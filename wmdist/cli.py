@@ -43,6 +43,8 @@ def _parser() -> argparse.ArgumentParser:
                    help="dotted overrides, e.g. actors.num=8")
     t.add_argument("--address", default=None, help="join a running Ray cluster ('auto' = the local one)")
     t.add_argument("--resume", default=None, metavar="RUN_DIR", help="continue a run from its latest checkpoint")
+    t.add_argument("--local", action="store_true",
+                   help="run every role in this process without Ray (ray.local=true): for debugging and smoke runs")
 
     c = sub.add_parser("config", help="print the resolved config (or every field's doc with --docs)",
                        description="Resolve defaults, overlays and --set overrides, check them, print YAML.")
@@ -90,6 +92,13 @@ def _load(path: str | None, overrides: list[str]):
     return load_config(path, overrides)
 
 
+def _train_overrides(a: argparse.Namespace) -> list[str]:
+    if a.local and a.address:
+        raise UsageError("--local runs without Ray; it cannot join --address")
+    return (list(a.set) + ([f"ray.address={a.address}"] if a.address else [])
+            + (["ray.local=true"] if a.local else []))
+
+
 def cmd_train(a: argparse.Namespace) -> int:
     from wmdist.runtime.train import train
 
@@ -97,9 +106,8 @@ def cmd_train(a: argparse.Namespace) -> int:
         if a.config:  # the run directory holds its own config: a second one would be ignored
             raise UsageError(f"give a CONFIG or --resume RUN_DIR, not both (the run's own config is "
                              f"{a.resume}/config.yaml; change it with --set)")
-        overrides = list(a.set) + ([f"ray.address={a.address}"] if a.address else [])
-        return train(resume=a.resume, overrides=overrides)
-    overrides = list(a.set) + ([f"ray.address={a.address}"] if a.address else [])
+        return train(resume=a.resume, overrides=_train_overrides(a))
+    overrides = _train_overrides(a)
     return train(cfg=_load(a.config, overrides))
 
 
@@ -159,9 +167,16 @@ def cmd_monitor(a: argparse.Namespace) -> int:
 
     from wmdist.telemetry.monitor import monitor_commands
 
-    port_file = Path(a.run_dir) / "metrics_port"
-    if not port_file.is_file():
-        raise UsageError(f"{a.run_dir} has no metrics_port file (is it a run directory with metrics enabled?)")
+    from wmdist.telemetry.monitor import tensorboard_lines
+
+    run = Path(a.run_dir)
+    if not (run / "config.yaml").is_file():
+        raise UsageError(f"{a.run_dir} is not a wmdist run directory (no config.yaml)")
+    port_file = run / "metrics_port"
+    if not port_file.is_file():  # metrics were off: TensorBoard still has every figure
+        print("\n".join(tensorboard_lines(run.resolve())))
+        print("# Prometheus/Grafana: this run served no metrics (metrics.enabled: false)")
+        return 0
     print(monitor_commands(a.run_dir, int(port_file.read_text().strip())))
     return 0
 

@@ -149,6 +149,13 @@ class Algorithm(ABC):
             raise ValueError(f"unknown capability {capability!r}; known: {', '.join(sorted(CAPABILITIES))}")
         return capability in cls.capabilities
 
+    @classmethod
+    def extra_roles(cls, run_config: Any) -> list:
+        """Roles this algorithm adds to the run (`wmdist.runtime.table.Role` entries: an
+        evaluation pool, for example); none by default. Each is built, placed, scheduled,
+        restarted and reported like the built-in ones."""
+        return []
+
     def __init__(self, spec: EnvSpec, config: Any, seed: int = 0) -> None:
         self.spec = spec
         self.config = config
@@ -156,6 +163,11 @@ class Algorithm(ABC):
 
     def validate(self) -> None:
         """Raise ValueError (one line) if this algorithm can't run on `self.spec`."""
+
+    def check_run(self, run: Any) -> None:
+        """Raise ValueError (one line) if the run's other sections (a `RunConfig`) cannot serve
+        this algorithm's config, e.g. it needs reanalyzers and `reanalyze.num` is 0. Called
+        before anything starts."""
 
     @abstractmethod
     def extra_fields(self) -> dict[str, FieldSpec]:
@@ -165,11 +177,6 @@ class Algorithm(ABC):
     @abstractmethod
     def make_policy(self, device: str = "cpu") -> Policy:
         ...
-
-    def check_run(self, run: Any) -> None:
-        """Raise ValueError (one line) if the run's other sections (a `RunConfig`) cannot serve
-        this algorithm's config, e.g. it needs reanalyzers and `reanalyze.num` is 0. Called
-        before anything starts."""
 
     @abstractmethod
     def make_learner(self, device: str = "cpu") -> Learner:

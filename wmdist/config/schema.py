@@ -87,6 +87,8 @@ class MetricsConfig:
     enabled: bool = param(True, "serve Prometheus metrics from the driver")
     host: str = param("127.0.0.1", "exporter bind address (0.0.0.0 only if you mean it)")
     port: int = param(0, "exporter port (0 = a free port; printed at start)", ge=0, le=65535)
+    tensorboard: bool = param(True, "also write TensorBoard event files (RUN_DIR/tensorboard): every metrics.jsonl "
+                                    "scalar and the learning curve; `wmdist monitor RUN_DIR` says how to open them")
 
 
 @dataclass
@@ -99,6 +101,8 @@ class CheckpointConfig:
 @dataclass
 class RayConfig:
     address: str = param("", "Ray cluster to join ('' = start an embedded local instance; 'auto' = the running one)")
+    local: bool = param(False, "run every role in this one process without Ray (the local runner, "
+                               "`wmdist train --local`): same code, one at a time, a debugger can step through it")
     num_cpus: int = param(0, "CPUs of the embedded instance (0 = all of this machine)", ge=0)
     num_gpus: int = param(-1, "GPUs of the embedded instance (-1 = detect)", ge=-1)
     object_store_mb: int = param(512, "object store size of the embedded instance in MB", ge=64)

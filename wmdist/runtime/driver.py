@@ -19,15 +19,18 @@ from typing import Any, Callable
 
 import numpy as np
 
+from wmdist.runtime.calls import get, wait
 from wmdist.runtime.checkpoint import save_checkpoint
 from wmdist.runtime.faults import died as _died
 from wmdist.runtime.faults import failed_to_start as _failed_to_start
 from wmdist.runtime.faults import one_line as _one_line
 from wmdist.runtime.faults import root_cause as _root_cause
 from wmdist.runtime.faults import transient
+from wmdist.runtime.table import LEARNER_SLICE_SECONDS, LOCAL_LEARNER_SLICE_SECONDS, LOOP, PACED, PERIODIC, BUILTIN_NAMES, Role
 from wmdist.runtime.topology import Topology
 
-LEARNER_SLICE_SECONDS = 1.0
+__all__ = ["LEARNER_SLICE_SECONDS", "Counters", "Driver", "RunResult"]
+
 RETRY_SECONDS = 0.5  # wait before re-asking an actor whose process died
 REPLAY_RETRY_SECONDS = 1.0  # wait before re-asking a role that could not reach the replay store
 # A replay store unreachable this long ends the run (one line naming --resume); shorter outages
@@ -37,6 +40,9 @@ SERVICE_CHECK_SECONDS = 1.0  # how often the driver looks at its private redis-s
 
 log = logging.getLogger("wmdist")  # the run's log file (train.py); never the console
 log.addHandler(logging.NullHandler())  # no file attached (tests, benchmarks): say nothing
+
+
+_ACTING = tuple(n for n in BUILTIN_NAMES if n not in ("replay", "limiter", "learner"))
 
 
 @dataclass
@@ -52,8 +58,9 @@ class Counters:
     sampled_sequences: int = 0
     nan_skips: int = 0
     eval_episodes: int = 0
-    restarts: dict = field(default_factory=lambda: {"collector": 0, "reanalyzer": 0, "evaluator": 0, "redis": 0})
-    busy: dict = field(default_factory=lambda: {"collector": 0.0, "learner": 0.0, "reanalyzer": 0.0, "evaluator": 0.0})
+    # per role of the table (an algorithm's own roles join when they first report), and "redis"
+    restarts: dict = field(default_factory=lambda: {**{r: 0 for r in _ACTING}, "redis": 0})
+    busy: dict = field(default_factory=lambda: {r: 0.0 for r in ("learner", *_ACTING)})
 
     def as_dict(self) -> dict:
         return dict(self.__dict__)
@@ -76,9 +83,15 @@ class RunResult:
 
 class Driver:
     def __init__(self, topo: Topology, counters: Counters, on_tick: Callable[[dict], None] | None = None,
-                 log_path: Path | None = None, plot: Callable[[], None] | None = None) -> None:
+                 log_path: Path | None = None, plot: Callable[[], None] | None = None,
+                 on_record: Callable[[dict], None] | None = None) -> None:
+        """`on_tick(snapshot)` about every `run.log_every_seconds`; `on_record(record)` for each
+        line written to metrics.jsonl (TensorBoard mirrors them); `plot()` redraws the curve."""
+        self.on_record = on_record
         self.topo, self.c = topo, counters
         self.cfg = topo.cfg
+        self.roles: dict[str, Role] = {r.name: r for r in topo.roles if r.call is not None}
+        self.learner_slice = LOCAL_LEARNER_SLICE_SECONDS if topo.local else LEARNER_SLICE_SECONDS
         self.on_tick, self.log_path, self.plot = on_tick, log_path, plot
         self.train_returns: collections.deque = collections.deque(maxlen=100)
         self.train_lengths: collections.deque = collections.deque(maxlen=100)
@@ -96,6 +109,7 @@ class Driver:
         self.t_start = time.monotonic()
         self.elapsed0 = counters.elapsed_seconds
         self.last_tick = self.last_plot = self.last_ckpt = self.last_eval = time.monotonic()
+        self.last_eval_steps = counters.env_steps
         self.rates = {"env_steps": 0.0, "updates": 0.0}
         self._rate_base = (time.monotonic(), counters.env_steps, counters.updates)
         self.last_snapshot: dict = {}
@@ -111,16 +125,9 @@ class Driver:
 
     # -- calls ---------------------------------------------------------------------------
     def _issue(self, kind: str, i: int) -> None:
-        t = self.topo
-        if kind == "collector":
-            ref = t.collectors[i].run_segment.remote(self.c.env_steps, self.c.updates)
-        elif kind == "learner":
-            ref = t.learner.train_for.remote(LEARNER_SLICE_SECONDS, self.cfg.run.max_updates)
-        elif kind == "reanalyzer":
-            ref = t.reanalyzers[i].run_job.remote()
-        else:
-            ref = t.evaluator.evaluate.remote()
-        self.inflight[ref] = (kind, i)
+        """Issue `kind`'s call on its actor i (the table entry says which call)."""
+        role = self.roles[kind]
+        self.inflight[role.call(self.topo.actors[kind][i], self)] = (kind, i)
 
     def _reanalyze_due(self) -> bool:
         """Pace reanalyzers: fresh targets for about `reanalyze.fraction` of learner samples."""
@@ -128,39 +135,30 @@ class Driver:
         return self.c.reanalyzed < want
 
     def _handle(self, kind: str, i: int, res: dict) -> None:
-        c = self.c
         self._note_process(kind, i, res)
-        if kind == "collector":
-            c.env_steps += int(res["env_steps"])
-            c.episodes += len(res["episodes"])
-            c.busy["collector"] += float(res.get("busy_seconds", 0.0))
-            self.train_returns.extend(res["episodes"])
-            self.train_lengths.extend(res["lengths"])
-            self.collector_versions[i] = int(res.get("version", -1))
-            self.limiter_blocked += int(bool(res.get("limiter_blocked")))
-        elif kind == "learner":
-            c.updates, c.version, c.nan_skips = int(res["updates"]), int(res["version"]), int(res["nan_skips"])
-            c.sampled_sequences = int(res["sampled_sequences"])
-            c.busy["learner"] = float(res["busy_seconds"])
-            self.learner_sample_wait = float(res.get("sample_wait_seconds", 0.0))
-            if res["losses"]:
-                self.losses = res["losses"]
-            if res["status"] == "nan_stop":
-                self.stop_reason = ("nan_stop", res["message"])
-            elif res["status"] == "error":
-                self.stop_reason = ("error", res["message"])
-        elif kind == "reanalyzer":
-            c.reanalyzed += int(res["reanalyzed"])
-            c.busy["reanalyzer"] += float(res.get("busy_seconds", 0.0))
+        role = self.roles[kind]
+        if role.handle is not None:
+            role.handle(self, i, res)
         else:
-            c.busy["evaluator"] += float(res.get("busy_seconds", 0.0))
-            if res["returns"]:
-                c.eval_episodes += len(res["returns"])
-                self.eval_return = float(np.mean(res["returns"]))
-                self.eval_length = float(np.mean(res["lengths"]))
-                # eval_min: the worst episode (board games: < 0 means the agent lost a game).
-                self._log({"kind": "eval", "eval_return": self.eval_return, "eval_length": self.eval_length,
-                           "eval_min": float(np.min(res["returns"])), "eval_version": res["version"]})
+            from wmdist.runtime.table import answer_busy
+
+            answer_busy(self, kind, res)
+
+    def record_eval(self, res: dict) -> None:
+        """An evaluation's episodes: the eval figures and a line in metrics.jsonl."""
+        self.c.eval_episodes += len(res["returns"])
+        self.eval_return = float(np.mean(res["returns"]))
+        self.eval_length = float(np.mean(res["lengths"]))
+        # eval_min: the worst episode (board games: < 0 means the agent lost a game); any other
+        # numbers the evaluator reports (e.g. lines lost over a whole game tree) go in as well
+        extra = {k: v for k, v in res.items() if k.startswith("eval_") and isinstance(v, (int, float))}
+        self._log({"kind": "eval", "eval_return": self.eval_return, "eval_length": self.eval_length,
+                   "eval_min": float(np.min(res["returns"])), "eval_version": res["version"], **extra})
+
+    def maybe_checkpoint(self) -> None:
+        every = self.cfg.checkpoint.every_seconds
+        if every > 0 and time.monotonic() - self.last_ckpt >= every:
+            self.checkpoint()
 
     def _note_process(self, kind: str, i: int, res: dict) -> None:
         """Count a restart when a new process answers for (kind, i): a pid other than the last
@@ -182,17 +180,18 @@ class Driver:
         if (kind, i) not in self.coming_back:  # a retry failing before it is back is the same death
             self.deaths[(kind, i)] += 1
             self.coming_back.add((kind, i))
-        limit = self.cfg.actors.max_restarts if kind == "collector" else -1
+        limit = self.roles[kind].max_restarts(self.cfg)
         return limit >= 0 and self.deaths[(kind, i)] > limit
 
     def _reissue(self, kind: str, i: int) -> None:
         if self.stop_reason is not None:
             return
-        if kind == "reanalyzer" and not self._reanalyze_due():
-            self.waiting_reanalyzers.add(i)
+        schedule = self.roles[kind].schedule
+        if schedule == PACED and not self._reanalyze_due():
+            self.waiting.add((kind, i))
             return
-        if kind == "evaluator":
-            self.evaluator_idle = True
+        if schedule == PERIODIC:
+            self.idle.add((kind, i))
             return
         self._issue(kind, i)
 
@@ -231,29 +230,36 @@ class Driver:
                     or (r.max_updates and self.c.updates >= r.max_updates)
                     or (r.max_minutes and self.elapsed() >= r.max_minutes * 60))
 
-    def run(self) -> RunResult:
-        import ray
+    def _due_periodic(self, now: float) -> bool:
+        """An evaluation is due: `eval.every_seconds` since the last, or `eval.every_env_steps`
+        more env steps."""
+        e = self.cfg.eval
+        return bool((e.every_seconds > 0 and now - self.last_eval >= e.every_seconds)
+                    or (e.every_env_steps > 0 and self.c.env_steps - self.last_eval_steps >= e.every_env_steps))
 
-        t = self.topo
-        self.waiting_reanalyzers: set[int] = set()
-        self.evaluator_idle = t.evaluator is not None
+    def run(self) -> RunResult:
+        self.waiting: set[tuple[str, int]] = set()  # paced calls not yet due
+        self.idle: set[tuple[str, int]] = set()  # periodic actors between calls
         self.learner_sample_wait = 0.0
-        self._issue("learner", 0)
-        for i in range(len(t.collectors)):
-            self._issue("collector", i)
-        for i in range(len(t.reanalyzers)):
-            self.waiting_reanalyzers.add(i)
+        for role in self.roles.values():  # the table's order: the learner before the collectors
+            for i in range(len(self.topo.actors.get(role.name, []))):
+                if role.schedule == LOOP:
+                    self._issue(role.name, i)
+                elif role.schedule == PACED:
+                    self.waiting.add((role.name, i))
+                elif role.schedule == PERIODIC:
+                    self.idle.add((role.name, i))
         try:
             while self.stop_reason is None:
-                ready, _ = ray.wait(list(self.inflight), num_returns=1, timeout=0.2)
+                ready, _ = wait(list(self.inflight), num_returns=1, timeout=0.2)
                 for ref in ready:
                     kind, i = self.inflight.pop(ref)
                     try:
-                        res = ray.get(ref)
+                        res = get(ref)
                     except Exception as err:  # noqa: BLE001 - classified below
                         log.error("%s %d: a call failed:\n%s", kind, i, err)  # the remote traceback, for the log
-                        if kind == "learner":
-                            self.stop_reason = ("learner_failed", f"the learner failed: {_one_line(err)}")
+                        if self.roles[kind].fatal:
+                            self.stop_reason = (f"{kind}_failed", f"the {kind} failed: {_one_line(err)}")
                             break
                         if _failed_to_start(err):  # a restart would fail the same way
                             self.stop_reason = ("error", f"{kind} {i} could not start: {_root_cause(err)}")
@@ -275,22 +281,18 @@ class Driver:
                             self.stop_reason = ("error", f"collector {i} failed: {_one_line(err)}")
                             break
                         raise
-                    if kind == "learner" and res.get("status") == "replay_down":
+                    if res.get("status") == "replay_down":
                         self._note_process(kind, i, res)
                         if self._replay_outage(res["message"]):
                             break
                         self.retry_at[(kind, i)] = time.monotonic() + REPLAY_RETRY_SECONDS
                         continue
                     self._handle(kind, i, res)
-                    if kind in ("collector", "learner"):
-                        self.outage_since = None  # a call that went through: replay is reachable
-                    if kind == "learner":
-                        self._maybe_checkpoint()
                     self._reissue(kind, i)
-                for i in sorted(self.waiting_reanalyzers):
+                for kind, i in sorted(self.waiting):
                     if self._reanalyze_due():
-                        self.waiting_reanalyzers.discard(i)
-                        self._issue("reanalyzer", i)
+                        self.waiting.discard((kind, i))
+                        self._issue(kind, i)
                 now = time.monotonic()
                 if now - self.last_service_check >= SERVICE_CHECK_SECONDS:
                     self.last_service_check = now
@@ -299,10 +301,11 @@ class Driver:
                     if now >= at:
                         del self.retry_at[(kind, i)]
                         self._reissue(kind, i)
-                if self.evaluator_idle and now - self.last_eval >= self.cfg.eval.every_seconds:
-                    self.evaluator_idle = False
-                    self.last_eval = now
-                    self._issue("evaluator", 0)
+                if self.idle and self._due_periodic(now):
+                    self.last_eval, self.last_eval_steps = now, self.c.env_steps
+                    for kind, i in sorted(self.idle):
+                        self._issue(kind, i)
+                    self.idle.clear()
                 if now - self.last_tick >= self.cfg.run.log_every_seconds:
                     self.tick()
                 if self._budget_done() and self.stop_reason is None:
@@ -328,36 +331,27 @@ class Driver:
 
     def _drain(self, timeout: float = 30.0) -> None:
         """Let in-flight calls finish so their data lands (bounded), then forget them."""
-        import ray
-
-        refs = [r for r, (k, _) in self.inflight.items() if k in ("collector", "learner", "evaluator")]
+        refs = [r for r, (k, _) in self.inflight.items() if self.roles[k].drain]
         deadline = time.monotonic() + timeout
         while refs and time.monotonic() < deadline:
-            ready, refs = ray.wait(refs, num_returns=1, timeout=max(deadline - time.monotonic(), 0.01))
+            ready, refs = wait(refs, num_returns=1, timeout=max(deadline - time.monotonic(), 0.01))
             for ref in ready:
                 kind, i = self.inflight.pop(ref)
                 try:
-                    self._handle(kind, i, ray.get(ref))
+                    self._handle(kind, i, get(ref))
                 except Exception:  # noqa: BLE001 - a dying actor's last call is lost
                     pass
         self.inflight.clear()
 
     # -- checkpoints, logs, metrics ---------------------------------------------------------
-    def _maybe_checkpoint(self) -> None:
-        every = self.cfg.checkpoint.every_seconds
-        if every > 0 and time.monotonic() - self.last_ckpt >= every:
-            self.checkpoint()
-
     def checkpoint(self) -> Path | None:
         """Write a checkpoint; None (and `checkpoint_error` set, the traceback in the log) when it
         could not be written. A checkpoint is complete or absent: the last good one stays."""
-        import ray
-
         self.last_ckpt = time.monotonic()
         self.c.elapsed_seconds = self.elapsed()
         try:
-            state = ray.get(self.topo.learner.state.remote(), timeout=120)
-            version, weights = ray.get(self.topo.learner.weights.remote(), timeout=120)
+            state = get(self.topo.learner.state.remote(), timeout=120)
+            version, weights = get(self.topo.learner.weights.remote(), timeout=120)
         except Exception:  # noqa: BLE001 - the learner is gone: nothing newer to save
             return None
         replay = self.topo.replay if self.cfg.checkpoint.replay else None
@@ -382,8 +376,10 @@ class Driver:
             return
         from wmdist.telemetry.curves import write_jsonl
 
-        write_jsonl(self.log_path, {"time": round(self.elapsed(), 3), "env_steps": self.c.env_steps,
-                                    "updates": self.c.updates, **record})
+        full = {"time": round(self.elapsed(), 3), "env_steps": self.c.env_steps, "updates": self.c.updates, **record}
+        write_jsonl(self.log_path, full)
+        if self.on_record is not None:
+            self.on_record(full)
 
     def snapshot(self, replay_stats: dict | None = None) -> dict:
         c = self.c

@@ -47,6 +47,10 @@ def check_resources(cfg: RunConfig) -> None:
     """An embedded instance's size is known before it starts: check the roles fit it now."""
     from wmdist.runtime.resources import check_fits
 
+    if cfg.ray.local:
+        if cfg.ray.address:
+            raise ConfigError("ray.local runs without Ray; it cannot join ray.address")
+        return  # no Ray: every role shares this process
     if cfg.ray.address:
         return  # a cluster's size is known only once joined (checked in topology.build)
     cluster = {"CPU": float(cfg.ray.num_cpus or os.cpu_count() or 1), "GPU": float(_gpus(cfg))}

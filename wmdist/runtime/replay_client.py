@@ -26,7 +26,6 @@ import os
 import threading
 
 import numpy as np
-import ray
 from ray.exceptions import RayActorError
 
 from wmdist.algos.base import FieldSpec
@@ -45,7 +44,7 @@ from wmdist.replay.storage_redis import (
     new_keys,
     pending_entry,
 )
-from wmdist.runtime.roles.replay_actor import LimiterActor, ShardActor
+from wmdist.runtime.calls import LocalHandle, get, kill
 
 
 def route(source_id: int, episode_id: np.ndarray, shards: int) -> np.ndarray:
@@ -127,7 +126,7 @@ class ReplayClient:
         try:
             if not free:
                 self._flush_counts()  # the limiter decides on every count this copy made
-            ok, version = (True, -1) if free else ray.get(self.limiter.acquire_insert.remote(n, timeout))
+            ok, version = (True, -1) if free else get(self.limiter.acquire_insert.remote(n, timeout))
         except RayActorError:
             return False  # the service was shut down
         if not ok:
@@ -139,7 +138,7 @@ class ReplayClient:
             self._gen += 1  # the next sample draws afresh, so it sees these
         else:  # one batched call per shard; Ray carries the arrays
             targets = np.unique(dest)
-            steps = sum(ray.get([self.shards[s].insert.remote(
+            steps = sum(get([self.shards[s].insert.remote(
                 batch if targets.size == 1 else batch.select(np.flatnonzero(dest == s)), min_version)
                 for s in targets]))
         if free:  # gates nothing: summed and sent at most every 50 ms (a Ray call costs ~1 ms here)
@@ -195,11 +194,11 @@ class ReplayClient:
                 self._count_samples(batch_size)
             elif limited:
                 self._flush_counts()  # e.g. this copy's own inserts towards min_size
-                if not ray.get(self.limiter.acquire_sample.remote(batch_size, timeout)):
+                if not get(self.limiter.acquire_sample.remote(batch_size, timeout)):
                     return None
                 self._warm = self.cfg.samples_per_insert == 0
             if (not limited and not self.direct
-                    and sum(m[0] for m in ray.get([s.mass.remote() for s in self.shards])) == 0):
+                    and sum(m[0] for m in get([s.mass.remote() for s in self.shards])) == 0):
                 return None
         except RayActorError:
             return None
@@ -229,7 +228,7 @@ class ReplayClient:
         if S == 1:
             counts, n, mass = np.array([batch_size]), 0, 0.0
         else:  # split B by size (uniform) or priority mass (prioritized) so shards act as one buffer
-            masses = ray.get([s.mass.remote() for s in self.shards])
+            masses = get([s.mass.remote() for s in self.shards])
             n = sum(m[0] for m in masses)
             mass = sum(m[1] for m in masses)
             if mass <= 0:
@@ -237,7 +236,7 @@ class ReplayClient:
             counts = self.rng.multinomial(batch_size, np.array([m[1] for m in masses]) / mass)
         beta = self._beta
         parts = [(i, self.shards[i].sample.remote(int(k), beta, n, mass)) for i, k in enumerate(counts) if k > 0]
-        got = ray.get([r for _, r in parts])
+        got = get([r for _, r in parts])
         w = np.concatenate([g["is_weight"] for g in got])
         return Sample(
             data={f: np.concatenate([g["data"][f] for g in got]) for f in self.fields},
@@ -282,7 +281,7 @@ class ReplayClient:
         previous sample, the pools are voided (read your writes) and nothing is asked ahead,
         since the next write (e.g. a priority update each learner step) would void it too."""
         if self._draws is None:
-            self._draws = DrawPools(len(self.shards), lambda s, k: self.shards[s].draw.remote(k), ray.get,
+            self._draws = DrawPools(len(self.shards), lambda s, k: self.shards[s].draw.remote(k), get,
                                     PREFETCH_SAMPLES, MAX_DRAW_AGE)
         steady = self._pool_gen == self._gen
         if not steady:  # this copy wrote since these were drawn: they may not reflect it
@@ -302,10 +301,10 @@ class ReplayClient:
             if redo.size == 0:
                 return data, mask
             by_shard = [(s, redo[shard_of[redo] == s]) for s in np.unique(shard_of[redo])]
-            ray.get([self.shards[s].drop_corrupt.remote(slots[rows], stamps[rows]) for s, rows in by_shard])
+            get([self.shards[s].drop_corrupt.remote(slots[rows], stamps[rows]) for s, rows in by_shard])
             again = []
             for s, rows in by_shard:
-                g = ray.get(self.shards[s].draw.remote(rows.size))
+                g = get(self.shards[s].draw.remote(rows.size))
                 if len(g["slots"]) < rows.size:
                     raise ValueError(f"replay shard {s} is empty")
                 d2, m2, miss2, corr2 = fetch_records(self.redis, g["keys"], self.fields, self.cfg.seq_len,
@@ -338,7 +337,7 @@ class ReplayClient:
             raise ValueError(f"priorities shape {pr.shape} != keys shape {np.shape(keys)}")
         refs = [self.shards[s].update_priorities.remote(sl, st, pr[rows])
                 for s, rows, sl, st in self._by_shard(keys, stamps)]
-        applied = int(sum(ray.get(refs)))
+        applied = int(sum(get(refs)))
         self._gen += 1  # draws taken before this reflect the old priorities
         return applied
 
@@ -346,19 +345,19 @@ class ReplayClient:
         """Overwrite stored fields [B, T, ...] of sampled keys; stale rows are dropped and counted."""
         refs = [self.shards[s].write_back.remote(sl, st, {k: v[rows] for k, v in fields.items()})
                 for s, rows, sl, st in self._by_shard(keys, stamps)]
-        applied = int(sum(ray.get(refs)))
+        applied = int(sum(get(refs)))
         self._gen += 1
         return applied
 
     def set_policy_version(self, version: int) -> None:
         """The learner's latest published version (drives `max_policy_lag`). Waited for: the
         limiter is a threaded actor, so a later call of this client could otherwise overtake it."""
-        ray.get(self.limiter.set_version.remote(int(version)))
+        get(self.limiter.set_version.remote(int(version)))
 
     # -- stats, checkpoints, shutdown ---------------------------------------------------
     def stats(self) -> dict[str, float]:
         self._flush_counts(settle=True)
-        per = ray.get([s.stats.remote() for s in self.shards])
+        per = get([s.stats.remote() for s in self.shards])
         out: dict[str, float] = {}
         for i, st in enumerate(per):
             for k, v in st.items():
@@ -366,16 +365,16 @@ class ReplayClient:
                 out[k] = out.get(k, 0.0) + v
         for r in DROP_REASONS:
             out.setdefault(f"drops_{r}", 0.0)
-        out.update(ray.get(self.limiter.stats.remote()))
+        out.update(get(self.limiter.stats.remote()))
         return out
 
     def save(self, directory: str) -> None:
         """Shards write `shard<i>.npz` (memory: all data; redis: index only), plus limiter state."""
         self._flush_counts(settle=True)
         os.makedirs(directory, exist_ok=True)
-        ray.get([s.save.remote(os.path.join(os.path.abspath(directory), f"shard{i}.npz"))
+        get([s.save.remote(os.path.join(os.path.abspath(directory), f"shard{i}.npz"))
                  for i, s in enumerate(self.shards)])
-        state = ray.get(self.limiter.state_dict.remote())
+        state = get(self.limiter.state_dict.remote())
         tmp = os.path.join(directory, "limiter.json.tmp")
         with open(tmp, "w", encoding="utf-8") as f:
             json.dump(state, f)
@@ -387,9 +386,9 @@ class ReplayClient:
             state = json.load(f)
         if not isinstance(state, dict):
             raise ValueError(f"{directory}/limiter.json is not a limiter state")
-        ray.get([s.restore.remote(os.path.join(os.path.abspath(directory), f"shard{i}.npz"))
+        get([s.restore.remote(os.path.join(os.path.abspath(directory), f"shard{i}.npz"))
                  for i, s in enumerate(self.shards)])
-        ray.get(self.limiter.load_state_dict.remote(state))
+        get(self.limiter.load_state_dict.remote(state))
 
     def revive_server(self) -> bool:
         """Owner with a private redis-server: start it again (same port, directory and AOF) if
@@ -419,15 +418,15 @@ class ReplayClient:
         if not self._owner:
             return
         try:
-            ray.get(self.limiter.close.remote(), timeout=30)
+            get(self.limiter.close.remote(), timeout=30)
         except Exception:  # already gone: nothing left to wake
             pass
         try:
-            ray.get([s.close.remote() for s in self.shards], timeout=30)
+            get([s.close.remote() for s in self.shards], timeout=30)
         except Exception:
             pass
         for a in [*self.shards, self.limiter]:
-            ray.kill(a, no_restart=True)
+            kill(a)
         if self._server is not None:
             self._server.stop()
             self._server = None
@@ -435,7 +434,7 @@ class ReplayClient:
 
 def _settle(refs: list) -> None:
     """Wait for count calls sent earlier (bounded: a limiter that does not answer is gone)."""
-    ray.get(refs, timeout=60)
+    get(refs, timeout=60)
 
 
 def shard_capacity(cfg: ReplayConfig, fields: dict[str, FieldSpec]) -> int:
@@ -451,11 +450,20 @@ def shard_capacity(cfg: ReplayConfig, fields: dict[str, FieldSpec]) -> int:
     return cap
 
 
-def create_replay(cfg: ReplayConfig, fields: dict[str, FieldSpec], run_dir: str, run_name: str) -> ReplayClient:
-    """Start the shard actors, the limiter and (redis with no URL) a private redis-server."""
+def create_replay(cfg: ReplayConfig, fields: dict[str, FieldSpec], run_dir: str, run_name: str,
+                  local: bool = False) -> ReplayClient:
+    """Start the shard actors, the limiter and (redis with no URL) a private redis-server.
+
+    Their resources and restart policy are the table's "replay" and "limiter" entries; with
+    `local` they are plain objects behind `LocalHandle`s (the Ray-free local runner)."""
+    from wmdist.runtime.table import BUILTIN, by_name
+
     cfg.validate()
-    if not ray.is_initialized():
-        raise ValueError("create_replay needs Ray initialised first")
+    if not local:
+        import ray
+
+        if not ray.is_initialized():
+            raise ValueError("create_replay needs Ray initialised first")
     cap = shard_capacity(cfg, fields)
     server, url, pwfile = None, "", ""
     if cfg.backend == "redis":
@@ -469,18 +477,30 @@ def create_replay(cfg: ReplayConfig, fields: dict[str, FieldSpec], run_dir: str,
                                  die_with_parent=threading.current_thread() is threading.main_thread()).start()
             url, pwfile = server.url, server.password_file
     namespaces = [f"wmdist:{run_name}:s{i}" for i in range(cfg.shards)]
-    placement = {"resources": dict(cfg.resources)} if cfg.resources else {}
-    shard_cls = ray.remote(ShardActor).options(num_cpus=cfg.shard_cpus, max_concurrency=8, max_restarts=-1,
-                                               max_task_retries=3, **placement)
-    shards = [shard_cls.remote(fields, cfg.seq_len, cap, cfg.sampler, cfg.priority_alpha, i, cfg.seed + i,
-                               cfg.backend, url, pwfile, namespaces[i]) for i in range(cfg.shards)]
-    limiter = ray.remote(LimiterActor).options(num_cpus=0, max_concurrency=64, **placement).remote(
-        cfg.samples_per_insert, cfg.min_size, cfg.error_buffer)
+    roles = by_name(BUILTIN)
+    shard_role, limiter_role = roles["replay"], roles["limiter"]
+    shard_args = [(fields, cfg.seq_len, cap, cfg.sampler, cfg.priority_alpha, i, cfg.seed + i,
+                   cfg.backend, url, pwfile, namespaces[i]) for i in range(cfg.shards)]
+    limiter_args = (cfg.samples_per_insert, cfg.min_size, cfg.error_buffer)
     try:
-        sizes = ray.get([s.mass.remote() for s in shards])  # also waits for redis shards to rebuild
+        if local:
+            shards = [LocalHandle(shard_role.actor()(*a)) for a in shard_args]
+            limiter = LocalHandle(limiter_role.actor()(*limiter_args))
+        else:
+            shards = [_remote(shard_role, cfg).remote(*a) for a in shard_args]
+            limiter = _remote(limiter_role, cfg).remote(*limiter_args)
+        sizes = get([s.mass.remote() for s in shards])  # also waits for redis shards to rebuild
     except Exception:
         if server is not None:
             server.stop()
         raise
-    ray.get(limiter.set_size.remote(sum(m[2] for m in sizes)))
+    get(limiter.set_size.remote(sum(m[2] for m in sizes)))
     return ReplayClient(cfg, fields, shards, limiter, server, url, pwfile, namespaces)
+
+
+def _remote(role, section: ReplayConfig):
+    """The Ray actor class of a replay role, with its table entry's resources and options."""
+    import ray
+
+    opts = dict(role.resources(section).options(), max_restarts=role.max_restarts(None), **role.options)
+    return ray.remote(role.actor()).options(**opts)

@@ -1,54 +1,27 @@
-"""Per-role Ray resources, torch threads, and the check that a config fits the cluster."""
+"""The check that a config's roles fit the cluster, summed over the table of roles."""
 from __future__ import annotations
-
-import math
-from dataclasses import dataclass, field
 
 from wmdist.config.errors import ConfigError
 from wmdist.config.schema import RunConfig
+from wmdist.runtime.table import Role, RoleResources, run_roles
 
 # The weight broker only forwards object refs: it needs no CPU of its own.
 BROKER_CPUS = 0.0
 
-
-@dataclass(frozen=True)
-class RoleResources:
-    """What one actor of a role asks Ray for."""
-
-    cpus: float
-    gpus: float = 0.0
-    custom: dict = field(default_factory=dict)
-
-    def options(self) -> dict:
-        opts: dict = {"num_cpus": self.cpus, "num_gpus": self.gpus}
-        if self.custom:
-            opts["resources"] = dict(self.custom)
-        return opts
-
-    @property
-    def threads(self) -> int:
-        """torch threads for this share of the machine (at least one)."""
-        return max(1, math.floor(self.cpus + 1e-9))
+__all__ = ["BROKER_CPUS", "RoleResources", "check_fits", "roles"]
 
 
-def roles(cfg: RunConfig) -> dict[str, tuple[RoleResources, int]]:
-    """role -> (resources of one actor, number of actors)."""
-    out = {
-        "collector": (RoleResources(cfg.actors.cpus, cfg.actors.gpus, cfg.actors.resources), cfg.actors.num),
-        "learner": (RoleResources(cfg.learner.cpus, cfg.learner.gpus, cfg.learner.resources), 1),
-        "replay": (RoleResources(cfg.replay.shard_cpus, custom=cfg.replay.resources), cfg.replay.shards),
-        "limiter": (RoleResources(0.0, custom=cfg.replay.resources), 1),
-        "reanalyzer": (RoleResources(cfg.reanalyze.cpus, cfg.reanalyze.gpus, cfg.reanalyze.resources), cfg.reanalyze.num),
-    }
-    if cfg.eval.every_seconds > 0:
-        out["evaluator"] = (RoleResources(cfg.eval.cpus), 1)
-    return out
+def roles(cfg: RunConfig, table: tuple[Role, ...] | None = None) -> dict[str, tuple[RoleResources, int]]:
+    """role -> (resources of one actor, number of actors), for every role with actors."""
+    table = run_roles(cfg) if table is None else table
+    return {r.name: (r.resources_of(cfg), r.count(cfg)) for r in table if r.count(cfg) > 0}
 
 
-def check_fits(cfg: RunConfig, cluster: dict[str, float]) -> None:
+def check_fits(cfg: RunConfig, cluster: dict[str, float], table: tuple[Role, ...] | None = None) -> None:
     """One clear error, before any actor starts, when the roles ask for more than exists."""
+    per_role = roles(cfg, table)
     need: dict[str, float] = {}
-    for res, n in roles(cfg).values():
+    for res, n in per_role.values():
         need["CPU"] = need.get("CPU", 0.0) + res.cpus * n
         need["GPU"] = need.get("GPU", 0.0) + res.gpus * n
         for k, v in res.custom.items():
@@ -57,6 +30,6 @@ def check_fits(cfg: RunConfig, cluster: dict[str, float]) -> None:
         have = float(cluster.get(key, 0.0))
         if amount > have + 1e-6:
             detail = ", ".join(f"{r} {res.cpus if key == 'CPU' else res.gpus if key == 'GPU' else res.custom.get(key, 0)} x {n}"
-                               for r, (res, n) in roles(cfg).items())
+                               for r, (res, n) in per_role.items())
             raise ConfigError(f"the config needs {amount:g} {key} but the cluster has {have:g} ({detail}); "
                               f"lower actors.num or the per-role cpus")

@@ -10,6 +10,7 @@ collectors pinned to tagged nodes, is a config change.
 """
 from __future__ import annotations
 
+import dataclasses
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -17,7 +18,9 @@ from typing import Any
 
 from wmdist.config.schema import RunConfig
 from wmdist.envs.spec import EnvSpec
-from wmdist.runtime.resources import BROKER_CPUS, check_fits, roles
+from wmdist.runtime.calls import LocalHandle, get, kill
+from wmdist.runtime.resources import BROKER_CPUS, check_fits
+from wmdist.runtime.table import Context, Role, RoleResources, by_name, run_roles
 
 
 
@@ -61,36 +64,58 @@ def _log_where_ray_logs() -> None:
 
 @dataclass
 class Topology:
+    """The run's actors, by role name (in table order), and the services they share."""
+
     cfg: RunConfig
     spec: EnvSpec
     run_dir: Path
     replay: Any
     broker: Any
-    learner: Any
-    collectors: list[Any] = field(default_factory=list)
-    reanalyzers: list[Any] = field(default_factory=list)
-    evaluator: Any = None
+    roles: tuple[Role, ...] = ()
+    actors: dict[str, list[Any]] = field(default_factory=dict)
+    local: bool = False  # the Ray-free local runner: every actor is a LocalHandle
+
+    def role(self, name: str) -> Role:
+        return by_name(self.roles)[name]
+
+    @property
+    def learner(self) -> Any:
+        return self.actors["learner"][0]
+
+    @property
+    def collectors(self) -> list[Any]:
+        return self.actors.get("collector", [])
+
+    @property
+    def reanalyzers(self) -> list[Any]:
+        return self.actors.get("reanalyzer", [])
+
+    @property
+    def evaluator(self) -> Any:
+        ev = self.actors.get("evaluator", [])
+        return ev[0] if ev else None
 
     def shutdown(self) -> None:
-        import ray
-
         try:
-            ray.get(self.learner.close.remote(), timeout=10)
+            get(self.learner.close.remote(), timeout=10)
         except Exception:  # noqa: BLE001 - shutting down anyway
             pass
         try:
             self.replay.close()
         except Exception:  # noqa: BLE001
             pass
-        for actor in [*self.collectors, *self.reanalyzers, self.evaluator, self.learner, self.broker]:
-            if actor is not None:
-                try:
-                    ray.kill(actor, no_restart=True)
-                except Exception:  # noqa: BLE001
-                    pass
+        for actor in [*(a for group in self.actors.values() for a in group), self.broker]:
+            try:
+                kill(actor)
+            except Exception:  # noqa: BLE001
+                pass
+        if self.local:
+            return
         # kills are asynchronous: give the processes a moment to hand their CPUs back, so a
         # next run in the same Ray instance (tests, notebooks) is not left pending
         import time
+
+        import ray
 
         deadline = time.monotonic() + 5.0  # on a shared cluster other jobs may keep CPUs: bounded
         while time.monotonic() < deadline:
@@ -99,45 +124,58 @@ class Topology:
             time.sleep(0.1)
 
 
-def build(cfg: RunConfig, spec: EnvSpec, run_dir: Path, fields: dict) -> Topology:
-    """Create every actor (after checking the cluster can hold them all)."""
-    import ray
+def build(cfg: RunConfig, spec: EnvSpec, run_dir: Path, fields: dict, local: bool = False) -> Topology:
+    """Create every actor of the table (after checking the cluster can hold them all).
 
-    from wmdist.runtime.roles.collector import Collector
-    from wmdist.runtime.roles.evaluator import EvaluatorRole
-    from wmdist.runtime.roles.learner import LearnerRole
-    from wmdist.runtime.roles.reanalyzer import ReanalyzerRole
+    Replay comes first (every role writes to or reads from it), then the weight broker, then
+    the roles in table order. With `local` every actor is a plain object in this process."""
     from wmdist.runtime.replay_client import create_replay
     from wmdist.runtime.roles.weights import WeightBroker
 
-    check_fits(cfg, ray.cluster_resources())
-    res = roles(cfg)
-    replay = create_replay(cfg.replay, fields, str(run_dir), cfg.run.name)
-    # the broker lives on the driver's node: losing any other node must not lose the weights' route
-    from ray.util.scheduling_strategies import NodeAffinitySchedulingStrategy
+    table = run_roles(cfg)
+    if local:
+        # one thread runs every role: a collector must not wait on a limiter only the learner frees
+        cfg = dataclasses.replace(cfg, actors=dataclasses.replace(cfg.actors, insert_timeout=0.0))
+    else:
+        import ray
 
-    here = NodeAffinitySchedulingStrategy(ray.get_runtime_context().get_node_id(), soft=False)
-    broker = ray.remote(WeightBroker).options(num_cpus=BROKER_CPUS, scheduling_strategy=here).remote()
-    lres = res["learner"][0]
-    learner = ray.remote(LearnerRole).options(**lres.options(), max_restarts=0, max_concurrency=1).remote(
-        cfg, spec, replay, broker, lres.threads)
-    topo = Topology(cfg, spec, run_dir, replay, broker, learner)
-    ray.get(learner.ping.remote())  # version 0 is published before anyone acts
+        check_fits(cfg, ray.cluster_resources(), table)
+    replay = create_replay(cfg.replay, fields, str(run_dir), cfg.run.name, local=local)
+    if local:
+        broker: Any = LocalHandle(WeightBroker())
+    else:
+        import ray
+        from ray.util.scheduling_strategies import NodeAffinitySchedulingStrategy
 
-    cres = res["collector"][0]
-    restart = dict(max_restarts=cfg.actors.max_restarts, max_task_retries=0)
-    topo.collectors = [
-        ray.remote(Collector).options(**cres.options(), **restart).remote(cfg, spec, i, replay, broker, cres.threads)
-        for i in range(cfg.actors.num)
-    ]
-    rres = res["reanalyzer"][0]
-    topo.reanalyzers = [
-        ray.remote(ReanalyzerRole).options(**rres.options(), max_restarts=-1, max_task_retries=0).remote(
-            cfg, spec, i, replay, broker, rres.threads)
-        for i in range(cfg.reanalyze.num)
-    ]
-    if "evaluator" in res:
-        eres = res["evaluator"][0]
-        topo.evaluator = ray.remote(EvaluatorRole).options(**eres.options(), max_restarts=-1).remote(
-            cfg, spec, broker, eres.threads)
+        # the broker lives on the driver's node: losing any other node must not lose the weights' route
+        here = NodeAffinitySchedulingStrategy(ray.get_runtime_context().get_node_id(), soft=False)
+        broker = ray.remote(WeightBroker).options(num_cpus=BROKER_CPUS, scheduling_strategy=here).remote()
+    topo = Topology(cfg, spec, run_dir, replay, broker, table, local=local)
+    ctx = Context(cfg, spec, replay, broker, topo.actors)
+    try:
+        for role in table:
+            if role.owner != "topology":
+                continue  # replay's shards and limiter: created with replay above
+            res = role.resources_of(cfg)
+            topo.actors[role.name] = [_start(role, ctx, i, res, local) for i in range(role.count(cfg))]
+            if role.ready_first:
+                get([a.ping.remote() for a in topo.actors[role.name]])
+    except BaseException:
+        topo.shutdown()
+        raise
     return topo
+
+
+def _start(role: Role, ctx: Context, i: int, res: RoleResources, local: bool) -> Any:
+    """Actor i of `role`: a Ray actor with the entry's resources and restart policy, or (local)
+    the object itself behind a LocalHandle."""
+    cls, args = role.actor(), role.args(ctx, i, res)
+    if local:
+        return LocalHandle(cls(*args))
+    import ray
+
+    restarts = role.max_restarts(ctx.cfg)
+    opts = dict(res.options(), max_restarts=restarts, **role.options)
+    if restarts != 0:
+        opts.setdefault("max_task_retries", 0)  # a failed call is the driver's to re-issue
+    return ray.remote(cls).options(**opts).remote(*args)

@@ -163,17 +163,20 @@ def _run(cfg: RunConfig, spec, fields: dict, run_dir: Path, ckpt: Path | None, s
     topo, telemetry, driver = None, None, None
     phase = "starting Ray"
     try:
-        start_ray(cfg)
+        if cfg.ray.local:
+            log.info("local runner: every role in this process, no Ray")
+        else:
+            start_ray(cfg)
         _stop_on_sigterm()  # after Ray, whose driver installs a SIGTERM handler of its own that aborts
         phase = "starting the actors"
-        topo = build(cfg, spec, run_dir, fields)
+        topo = build(cfg, spec, run_dir, fields, local=cfg.ray.local)
         counters = Counters()
         if ckpt is not None:
-            import ray
+            from wmdist.runtime.calls import get
 
             phase = f"restoring {ckpt.name}"
             counters = Counters.from_dict(ck.load_counters(ckpt))
-            ray.get(topo.learner.load.remote(state))
+            get(topo.learner.load.remote(state))
             if (ckpt / "replay").exists():
                 topo.replay.restore(str(ckpt / "replay"))
             print(f"wmdist: resumed from {ckpt.name} at {counters.env_steps} env steps, {counters.updates} updates",
@@ -181,8 +184,14 @@ def _run(cfg: RunConfig, spec, fields: dict, run_dir: Path, ckpt: Path | None, s
         state = None  # the learner holds it now
         telemetry = Telemetry(cfg, run_dir, out, hub=hub)
         hub = None
-        driver = Driver(topo, counters, on_tick=telemetry.update, log_path=run_dir / METRICS_FILE,
-                        plot=lambda: plot_learning_curve(str(run_dir / METRICS_FILE), str(run_dir / CURVE_FILE)))
+        tel = telemetry
+
+        def plot() -> None:
+            plot_learning_curve(str(run_dir / METRICS_FILE), str(run_dir / CURVE_FILE))
+            tel.curve(run_dir / CURVE_FILE, driver.c.env_steps)
+
+        driver = Driver(topo, counters, on_tick=telemetry.update, log_path=run_dir / METRICS_FILE, plot=plot,
+                        on_record=telemetry.record)
         phase = "training"
         result = driver.run()
     except KeyboardInterrupt:  # during start-up (the driver loop handles its own)

@@ -22,7 +22,6 @@ from prometheus_client import start_http_server
 from prometheus_client.core import CollectorRegistry, CounterMetricFamily, GaugeMetricFamily, Metric
 from prometheus_client.registry import Collector
 
-ROLES = ("collector", "learner", "reanalyzer", "evaluator", "replay")
 
 
 @dataclass(frozen=True)
@@ -73,8 +72,9 @@ METRICS: dict[str, MetricDef] = {
     "wmdist_policy_lag_drops_total": _c("Sequences dropped for exceeding the maximum policy lag."),
     "wmdist_reanalyzed_sequences_total": _c("Sequences whose targets a reanalyzer refreshed."),
     # processes
-    "wmdist_actor_restarts_total": _c("Actor restarts after a failure, by role.", "role", role=ROLES),
-    "wmdist_busy_seconds_total": _c("Seconds each role spent working (not waiting), summed over its actors.", "role", role=ROLES),
+    # role: a name from the run's table of roles (wmdist/runtime/table.py), an algorithm's own roles too
+    "wmdist_actor_restarts_total": _c("Actor restarts after a failure, by role.", "role"),
+    "wmdist_busy_seconds_total": _c("Seconds each role spent working (not waiting), summed over its actors.", "role"),
 }
 
 

@@ -76,6 +76,16 @@ def write_prometheus_config(out_dir: str | os.PathLike[str], metrics_port: int, 
     return path
 
 
+def tensorboard_lines(run: Path) -> list[str]:
+    """How to open the run's TensorBoard event files (none if it wrote none)."""
+    from wmdist.telemetry.tensorboard import TB_DIR
+
+    if not (run / TB_DIR).is_dir():
+        return ["# TensorBoard: this run wrote no event files (metrics.tensorboard: false)"]
+    return ["# TensorBoard: every metrics.jsonl scalar, the learning curve (Images). UI: http://127.0.0.1:6006",
+            f"tensorboard --logdir {shlex.quote(str(run / TB_DIR))} --host 127.0.0.1 --port 6006"]
+
+
 def monitor_commands(
     run_dir: str,
     metrics_port: int,
@@ -108,7 +118,7 @@ def monitor_commands(
         "GF_PATHS_DATA": str(mon / "grafana-data"),
     }
     docker_env = {**env, "WMDIST_DASHBOARDS_DIR": "/etc/grafana/dashboards/wmdist"}
-    lines = [
+    lines = [*tensorboard_lines(run), "",
         f"# Prometheus: scrapes the wmdist exporter (127.0.0.1:{metrics_port}) and the local Ray node;",
         f"# alert rules from deploy/prometheus/alerts.yml. UI: {prom_url}",
         f"prometheus --config.file={q(config)} --storage.tsdb.path={q(mon / 'prometheus-data')} "

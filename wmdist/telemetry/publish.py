@@ -7,9 +7,6 @@ from typing import IO
 
 from wmdist.config.schema import RunConfig
 
-ROLES = ("collector", "learner", "reanalyzer", "evaluator")
-
-
 def publish(hub, snap: dict) -> None:
     """Set every wmdist_ metric from one driver snapshot (counters are set to totals)."""
     s = hub.set
@@ -30,10 +27,12 @@ def publish(hub, snap: dict) -> None:
     s("wmdist_weights_version", snap["version"])
     s("wmdist_weights_version_gap", snap["version_gap"])
     s("wmdist_reanalyzed_sequences_total", snap["reanalyzed"])
-    for role in ROLES:
-        s("wmdist_busy_seconds_total", snap["busy"].get(role, 0.0), role=role)
-        if role != "learner":
-            s("wmdist_actor_restarts_total", snap["restarts"].get(role, 0), role=role)
+    # one series per role of the run's table (the driver's counters hold every role that works)
+    for role, seconds in snap["busy"].items():
+        s("wmdist_busy_seconds_total", seconds, role=role)
+    for role, n in snap["restarts"].items():
+        if role != "redis":  # the private redis-server is a service, not an actor
+            s("wmdist_actor_restarts_total", n, role=role)
     replay = snap.get("replay") or {}
     s("wmdist_policy_lag_drops_total", replay.get("drops_policy_lag", 0))
     # measured train ratio: learner-sampled sequences per inserted sequence (replay.samples_per_insert);
@@ -74,6 +73,21 @@ class Telemetry:
             (run_dir / "metrics_port").write_text(str(self.hub.port))
             print(f"wmdist: metrics at {self.hub.url}", file=out, flush=True)
         self.progress = Progress(cfg.run.max_env_steps, cfg.run.max_minutes, stream=out)
+        self.tb = None
+        if cfg.metrics.tensorboard:
+            from wmdist.telemetry.tensorboard import TensorBoardLog
+
+            self.tb = TensorBoardLog(run_dir)
+
+    def record(self, record: dict) -> None:
+        """One metrics.jsonl record, mirrored into TensorBoard."""
+        if self.tb is not None:
+            self.tb.record(record)
+
+    def curve(self, png_path: Path, env_steps: int) -> None:
+        """The redrawn learning curve, as a TensorBoard image."""
+        if self.tb is not None and png_path.is_file():
+            self.tb.image("learning_curve", png_path, env_steps)
 
     def update(self, snap: dict) -> None:
         if self.hub is not None:
@@ -82,5 +96,7 @@ class Telemetry:
 
     def close(self) -> None:
         self.progress.close()
+        if self.tb is not None:
+            self.tb.close()
         if self.hub is not None:
             self.hub.close()

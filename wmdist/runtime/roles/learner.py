@@ -89,10 +89,10 @@ class LearnerRole:
 
     def publish(self) -> int:
         """One `ray.put` per version; the broker hands its ref to every puller."""
-        import ray
+        from wmdist.runtime.calls import get, is_local, put
 
-        ref = ray.put(self.learner.get_weights())
-        ray.get(self.broker.publish.remote(self.version, [ref]))
+        ref = put(self.learner.get_weights(), local=is_local(self.broker))
+        get(self.broker.publish.remote(self.version, [ref]))
         self.replay.set_policy_version(self.version)  # replay drops data older than max_policy_lag
         return self.version
 

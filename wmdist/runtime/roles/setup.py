@@ -47,6 +47,8 @@ def was_restarted() -> bool:
 
         import ray
 
+        if not ray.is_initialized():  # the local runner: asking would start a Ray instance
+            return False
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             return bool(ray.get_runtime_context().was_current_actor_reconstructed)

@@ -31,9 +31,9 @@ class WeightBroker:
 
 def pull(broker: Any, known_version: int, timeout: float | None = 30.0) -> tuple[int, dict | None]:
     """(version, weights) if a newer snapshot than `known_version` exists, else (version, None)."""
-    import ray
+    from wmdist.runtime.calls import get
 
-    version, box = ray.get(broker.latest.remote(known_version), timeout=timeout)
+    version, box = get(broker.latest.remote(known_version), timeout=timeout)
     if not box:
         return version, None
-    return version, ray.get(box[0], timeout=timeout)
+    return version, get(box[0], timeout=timeout)
