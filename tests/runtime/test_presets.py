@@ -37,6 +37,12 @@ BUDGET = {
                           "algo.search.num_simulations=2", "algo.value_support=20", "algo.reward_support=5"],
     "dreamerv3_dmc_pixels.yaml": ["run.max_updates=4", "replay.min_size=60", "learner.batch_size=2",
                                   "replay.seq_len=16", "actors.envs_per_actor=2"],
+    # the authors' Atari network (64 channels, LSTM 512, projector 1024) shrunk like muzero_atari's
+    "efficientzero_atari.yaml": ["run.max_env_steps=200", "replay.min_size=60", "learner.batch_size=4",
+                                 "algo.conv_channels=8", "algo.hidden=[16]", "algo.search.num_simulations=2",
+                                 "algo.value_support=20", "algo.reward_support=5", "algo.lstm_hidden=16",
+                                 "algo.proj_hidden=16", "algo.proj_dim=16", "algo.pred_hidden=8",
+                                 "reanalyze.batch_size=2"],
     # PlaNet plans every action with CEM: a small planner keeps the collector's steps cheap
     "planet_dmc_cartpole_swingup.yaml": ["run.max_updates=25", "replay.min_size=200", "actors.warmup_random_steps=200",
                                          "learner.batch_size=8", "replay.seq_len=16", "replay.samples_per_insert=40",
@@ -52,6 +58,7 @@ DREAMER = ["run.max_updates=25", "replay.min_size=200", "learner.batch_size=8", 
            "replay.samples_per_insert=40", "replay.error_buffer=40"]
 MUZERO = ["run.max_updates=40", "replay.min_size=300", "learner.batch_size=32"]
 SMOKE = {"muzero_atari.yaml", "dreamerv3_dmc_pixels.yaml", "planet_dmc_cartpole_swingup_pixels.yaml"}
+SMOKE.add("efficientzero_atari.yaml")
 SCORE_BATCHES = 6  # fixed batches each state is scored on
 
 

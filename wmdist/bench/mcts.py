@@ -5,11 +5,16 @@ Cases: B in {1, 8, 64, 256} roots, A in {2, 18} actions, 50 simulations, pUCT.
   is the engine's (selection, expansion, backup, latent store, Python loop).
   `vs_reference` = its simulations/s over the plain-Python reference search's, measured
   in the same run on the same pre-generated outputs.
+- kind "tree_prefix": the same in EfficientZero's value-prefix mode (recurrent_fn takes
+  the reset flags; latents carry an LSTM state (h, c) of 2 x 64 floats beside the 8), so
+  the cost of the prefix backup and the bigger latent rows shows beside "tree".
 - kind "mlp": a torch MLP world model (latent 64, hidden 128, one thread);
   `tree_fraction_cpu` = share of the search's CPU time outside recurrent_fn,
   `forward_per_cpu_s` the raw batched forward passes per CPU second of the same model at
   that B, and `search_cpu_vs_forwards_only` = search CPU time / CPU time of the same 50
   forward passes alone (1.0 = the tree is free).
+- kind "mlp_lstm": the MLP plus a value-prefix LSTM cell (hidden 64) whose state is zeroed
+  at the reset flags and kept with each node's latent (EfficientZero's search).
 Times are the best of many repeats (at least `repeats`, then until ~1 s has passed),
 measured twice: wall clock and this thread's CPU time (`*_cpu` fields: what the search
 costs when the machine is shared with other processes, which only deschedule it).
@@ -33,24 +38,28 @@ from wmdist.search.reference import reference_search
 
 SIMS = 50
 LATENT, HIDDEN = 64, 128
+LSTM_HIDDEN = 64  # value-prefix cases: the LSTM state (h, c) each node keeps
 
 
 class _Pregenerated:
     """recurrent_fn replaying random outputs prepared in advance (latent [B, 8] float32)."""
 
-    def __init__(self, batch: int, num_actions: int, rng: np.random.Generator) -> None:
+    def __init__(self, batch: int, num_actions: int, rng: np.random.Generator, prefix: bool = False) -> None:
         self.reward = rng.normal(size=(SIMS, batch))
         self.value = rng.normal(size=(SIMS, batch))
         self.logits = rng.normal(size=(SIMS, batch, num_actions))
         self.latent = np.zeros((batch, 8), dtype=np.float32)
+        if prefix:  # value-prefix mode: an LSTM state (h, c) travels with each latent
+            state = np.zeros((batch, LSTM_HIDDEN), dtype=np.float32)
+            self.latent = (self.latent, state, state.copy())
         self.s = 0
 
-    def __call__(self, latents, actions):
+    def __call__(self, latents, actions, reset=None):
         s = self.s % SIMS
         self.s += 1
         return self.reward[s], self.value[s], self.logits[s], latents
 
-    def step(self, latent, action):  # one-root adapter for the reference search
+    def step(self, latent, action, reset=None):  # one-root adapter for the reference search
         s = self.s % SIMS
         self.s += 1
         return self.reward[s, 0], self.value[s, 0], self.logits[s, 0], latent
@@ -112,11 +121,11 @@ def _forward_rate(batch: int, num_actions: int, repeats: int) -> float:
     return SIMS / _best_time(forwards, repeats, min_total=0.3)[1]
 
 
-def _tree_case(batch: int, num_actions: int, ref: tuple[float, float], repeats: int) -> dict:
+def _tree_case(batch: int, num_actions: int, ref: tuple[float, float], repeats: int, prefix: bool = False) -> dict:
     rng = np.random.default_rng(0)
-    model = _Pregenerated(batch, num_actions, rng)
+    model = _Pregenerated(batch, num_actions, rng, prefix)
     logits, value, legal = _roots(batch, num_actions, rng)
-    config = SearchConfig(num_simulations=SIMS)
+    config = SearchConfig(num_simulations=SIMS, value_prefix=prefix)
     search_rng = np.random.default_rng(1)
 
     def once():
@@ -126,7 +135,8 @@ def _tree_case(batch: int, num_actions: int, ref: tuple[float, float], repeats: 
     calib = _forward_rate(64, 18, repeats)
     best, best_cpu = _best_time(once, repeats, min_total=1.0)
     rate, rate_cpu = batch * SIMS / best, batch * SIMS / best_cpu
-    return {"kind": "tree", "B": batch, "A": num_actions, "sims": SIMS, "sims_per_s": round(rate),
+    return {"kind": "tree_prefix" if prefix else "tree", "B": batch, "A": num_actions, "sims": SIMS,
+            "sims_per_s": round(rate),
             "sims_per_cpu_s": round(rate_cpu), "ms_per_search": round(best * 1e3, 3),
             "calib_forward_per_cpu_s": round(calib),
             "sims_per_cpu_s_normalised": round(rate_cpu * IDLE_FORWARD_PER_S / calib),
@@ -134,34 +144,45 @@ def _tree_case(batch: int, num_actions: int, ref: tuple[float, float], repeats: 
             "vs_reference": round(rate / ref[0], 1), "vs_reference_cpu": round(rate_cpu / ref[1], 1)}
 
 
-def _reference_rate(num_actions: int) -> tuple[float, float]:
+def _reference_rate(num_actions: int, prefix: bool = False) -> tuple[float, float]:
     rng = np.random.default_rng(0)
-    model = _Pregenerated(1, num_actions, rng)
+    model = _Pregenerated(1, num_actions, rng, prefix)
     logits, value, legal = _roots(1, num_actions, rng)
-    config = SearchConfig(num_simulations=SIMS)
+    config = SearchConfig(num_simulations=SIMS, value_prefix=prefix)
     zeros = np.zeros(num_actions)
+    root = tuple(x[0] for x in model.latent) if prefix else model.latent[0]
 
     def once():
-        reference_search(model.latent[0], logits[0], value[0], legal[0], model.step, config, zeros, zeros, False)
+        reference_search(root, logits[0], value[0], legal[0], model.step, config, zeros, zeros, False)
 
     wall, cpu = _best_time(once, 20, min_total=0.5)
     return SIMS / wall, SIMS / cpu
 
 
-def _mlp_case(batch: int, num_actions: int, repeats: int) -> dict:
+def _mlp_case(batch: int, num_actions: int, repeats: int, lstm: bool = False) -> dict:
     torch.manual_seed(0)
     net = _MLPModel(num_actions).eval()
+    cell = nn.LSTMCell(LATENT, LSTM_HIDDEN).eval()  # value-prefix cases: the prefix read from h
     rng = np.random.default_rng(0)
     logits, value, legal = _roots(batch, num_actions, rng)
     root = torch.randn(batch, LATENT)
-    config = SearchConfig(num_simulations=SIMS)
+    if lstm:
+        root = (root, torch.zeros(batch, LSTM_HIDDEN), torch.zeros(batch, LSTM_HIDDEN))
+    config = SearchConfig(num_simulations=SIMS, value_prefix=lstm)
     search_rng = np.random.default_rng(1)
     model_cpu = [0.0]  # thread CPU seconds spent inside recurrent_fn
 
-    def recurrent_fn(latents, actions):
+    def recurrent_fn(latents, actions, reset=None):
         c0 = time.thread_time()
         with torch.no_grad():
-            r, v, lg, nxt = net(latents, torch.from_numpy(actions))
+            if lstm:
+                s, h, c = latents
+                keep = torch.from_numpy(~reset)[:, None].to(h.dtype)  # zero state at a reset
+                _, v, lg, nxt = net(s, torch.from_numpy(actions))
+                h, c = cell(nxt, (h * keep, c * keep))
+                r, nxt = h[:, 0], (nxt, h, c)
+            else:
+                r, v, lg, nxt = net(latents, torch.from_numpy(actions))
         out = r.numpy(), v.numpy(), lg.numpy(), nxt
         model_cpu[0] += time.thread_time() - c0
         return out
@@ -178,7 +199,8 @@ def _mlp_case(batch: int, num_actions: int, repeats: int) -> dict:
         if cpu < best_cpu:
             best_cpu, best_share = cpu, 1.0 - model_cpu[0] / cpu
     fwd_cpu = SIMS / _forward_rate(batch, num_actions, repeats)
-    return {"kind": "mlp", "B": batch, "A": num_actions, "sims": SIMS, "sims_per_s": round(batch * SIMS / best),
+    return {"kind": "mlp_lstm" if lstm else "mlp", "B": batch, "A": num_actions, "sims": SIMS,
+            "sims_per_s": round(batch * SIMS / best),
             "sims_per_cpu_s": round(batch * SIMS / best_cpu), "ms_per_search": round(best * 1e3, 3),
             "tree_fraction_cpu": round(best_share, 3), "forward_per_cpu_s": round(SIMS / fwd_cpu),
             "search_cpu_vs_forwards_only": round(best_cpu / fwd_cpu, 3)}
@@ -193,10 +215,12 @@ def run(quick: bool = False) -> Iterator[dict]:
         actions = (18,) if quick else (2, 18)
         repeats = 5 if quick else 15
         for num_actions in actions:
-            ref_rate = _reference_rate(num_actions)
-            for batch in batches:
+            ref_rate, ref_prefix = _reference_rate(num_actions), _reference_rate(num_actions, prefix=True)
+            for batch in batches:  # each value-prefix case right beside its plain one
                 yield _tree_case(batch, num_actions, ref_rate, repeats)
+                yield _tree_case(batch, num_actions, ref_prefix, repeats, prefix=True)
             for batch in batches:
                 yield _mlp_case(batch, num_actions, repeats)
+                yield _mlp_case(batch, num_actions, repeats, lstm=True)
     finally:
         torch.set_num_threads(torch_threads)
