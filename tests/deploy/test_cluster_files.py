@@ -114,6 +114,37 @@ def test_roles_can_be_placed_by_custom_resources():
     assert m and json.loads(m.group(1))["collector"] > 0
 
 
+def _custom_resources(cfg: dict) -> set[str]:
+    """Custom resource names a cluster file offers (node types and `ray start --resources`)."""
+    names = {k for t in cfg.get("available_node_types", {}).values() for k in t.get("resources", {})}
+    for cmd in cfg.get("head_start_ray_commands", []) + cfg.get("worker_start_ray_commands", []):
+        for m in re.finditer(r"--resources='([^']+)'", cmd):
+            names |= set(json.loads(m.group(1)))
+    return names - {"CPU", "GPU", "memory", "object_store_memory"}
+
+
+@pytest.mark.parametrize("path", CLUSTER_FILES, ids=lambda p: p.name)
+def test_every_custom_resource_is_a_role_a_config_can_place(path):
+    """The cluster files read the table of roles: each custom resource they offer names a role
+    whose config section has a `resources` field, and setting it asks Ray for that resource."""
+    from wmdist.config.loader import load_config
+    from wmdist.runtime.resources import roles
+    from wmdist.runtime.table import BUILTIN
+
+    offered = _custom_resources(_load(path))
+    assert offered, path.name
+    sections = {"collector": "actors", "learner": "learner", "reanalyzer": "reanalyze", "replay": "replay",
+                "evaluator": "eval"}
+    table = {r.name: r for r in BUILTIN}
+    for name in offered:
+        assert name in table, f"{path.name} offers {name!r}, which is no role of the table"
+        section = sections[name]
+        cfg = load_config(str(REPO / "configs" / "muzero_cartpole.yaml"),
+                          [f"{section}.resources={{{name}: 1}}", "reanalyze.num=1"])
+        res, _ = roles(cfg)[name]
+        assert res.custom == {name: 1}, (name, res)
+
+
 @pytest.mark.parametrize("dockerfile", sorted((REPO / "docker").glob("*.Dockerfile")), ids=lambda p: p.name)
 def test_dockerfiles_install_through_make_setup_and_copy_only_what_exists(dockerfile):
     text = dockerfile.read_text()

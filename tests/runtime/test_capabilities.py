@@ -17,7 +17,7 @@ from tests.runtime.run_dirs import run_dir_with_checkpoint
 
 ROOT = Path(__file__).resolve().parents[2]
 # the code that must stay algorithm-agnostic
-AGNOSTIC = [ROOT / "wmdist" / "runtime", ROOT / "wmdist" / "cli.py", ROOT / "wmdist" / "config"]
+AGNOSTIC = [ROOT / "wmdist" / "runtime", ROOT / "wmdist" / "telemetry", ROOT / "wmdist" / "cli.py", ROOT / "wmdist" / "config"]
 
 
 # --- 1. no branching on an algorithm's name ------------------------------------------------

@@ -134,40 +134,21 @@ def _evaluator_answer(d: "Driver", i: int, res: dict) -> None:
 
 
 # -- the built-in roles -----------------------------------------------------------------------
-def _collector_cls() -> type:
-    from wmdist.runtime.roles.collector import Collector
+def _late(module: str, name: str) -> Callable[[], type]:
+    """The class `module.name`, imported when a role is built (the actors import torch)."""
+    def load() -> type:
+        import importlib
 
-    return Collector
-
-
-def _learner_cls() -> type:
-    from wmdist.runtime.roles.learner import LearnerRole
-
-    return LearnerRole
+        return getattr(importlib.import_module(module), name)
+    return load
 
 
-def _reanalyzer_cls() -> type:
-    from wmdist.runtime.roles.reanalyzer import ReanalyzerRole
-
-    return ReanalyzerRole
-
-
-def _evaluator_cls() -> type:
-    from wmdist.runtime.roles.evaluator import EvaluatorRole
-
-    return EvaluatorRole
-
-
-def _shard_cls() -> type:
-    from wmdist.runtime.roles.replay_actor import ShardActor
-
-    return ShardActor
-
-
-def _limiter_cls() -> type:
-    from wmdist.runtime.roles.replay_actor import LimiterActor
-
-    return LimiterActor
+_collector_cls = _late("wmdist.runtime.roles.collector", "Collector")
+_learner_cls = _late("wmdist.runtime.roles.learner", "LearnerRole")
+_reanalyzer_cls = _late("wmdist.runtime.roles.reanalyzer", "ReanalyzerRole")
+_evaluator_cls = _late("wmdist.runtime.roles.evaluator", "EvaluatorRole")
+_shard_cls = _late("wmdist.runtime.roles.replay_actor", "ShardActor")
+_limiter_cls = _late("wmdist.runtime.roles.replay_actor", "LimiterActor")
 
 
 def _sized(section: Any) -> RoleResources:

@@ -1,14 +1,14 @@
-"""A small in-process actor-learner loop for Dreamer tests (no Ray): vector env + policy +
-SequenceWriter + uniform sampling + learner, following the runtime's step convention."""
+"""Dreamer test helpers: a tiny config, and an in-process loop over the local runner's own
+collector, replay and learner (no Ray; the runtime's step convention by construction)."""
 from __future__ import annotations
 
-import numpy as np
 import torch
 
+from tests.algos.local_config import local_run_config
 from wmdist.algos.dreamer import Dreamer, DreamerConfig
 from wmdist.envs.config import EnvConfig
-from wmdist.envs.vector import make_vector_env
-from wmdist.replay.writer import SequenceWriter
+from wmdist.envs.factory import env_spec
+from wmdist.runtime.local import LocalSession
 
 
 def tiny_config(version: int = 3, **over) -> DreamerConfig:
@@ -18,54 +18,22 @@ def tiny_config(version: int = 3, **over) -> DreamerConfig:
 
 
 def run_loop(env_id: str, cfg: DreamerConfig, env_steps: int, updates_every: int = 16, batch_size: int = 8,
-             seq_len: int = 16, num_envs: int = 4, seed: int = 0, log=None,
+             seq_len: int = 16, num_envs: int = 4, seed: int = 0,
              ) -> tuple[Dreamer, list[dict[str, float]], list[float]]:
-    """Collect `env_steps` steps; after each `updates_every` env steps do one update.
+    """Collect `env_steps` steps with the runtime's own collector and replay (the local
+    runner's `LocalSession`); after each `updates_every` env steps do one update.
     Returns (algo, per-update metrics, returns of the finished episodes)."""
     torch.manual_seed(seed)
-    venv = make_vector_env(EnvConfig(id=env_id), num_envs, seed)
-    algo = Dreamer(venv.spec, cfg, seed)
-    policy, learner = algo.make_policy(), algo.make_learner()
-    policy.set_weights(learner.get_weights(), 0)
-    writer = SequenceWriter(algo.step_fields(), seq_len, seq_len // 2, num_envs)
-    store: list[dict[str, np.ndarray]] = []
-    rng = np.random.default_rng(seed)
+    env_cfg = EnvConfig(id=env_id)
+    algo = Dreamer(env_spec(env_cfg), cfg, seed)
+    session = LocalSession(local_run_config(algo, env_cfg, num_envs, seq_len, seq_len // 2, seed, batch_size))
     metrics: list[dict[str, float]] = []
-    step = venv.reset()
-    reward = np.zeros(num_envs, np.float32)
-    episode_returns: list[float] = []
-    running = np.zeros(num_envs)
-    version, t = 0, 0
-    zeros_action = np.zeros((num_envs, *venv.spec.action_shape), venv.spec.action_dtype)
-    while t < env_steps:
-        actions, extras = policy.act(step.obs, step.first, step.legal, step.to_play, explore=True)
-        no = np.zeros(num_envs, bool)
-        writer.add({"obs": step.obs, "action": actions, "reward": reward, "first": step.first, "last": no,
-                    "terminal": no, **extras}, version)
-        step = venv.step(actions)
-        ended = step.terminated | step.truncated
-        running += step.reward
-        if ended.any():
-            ids = np.flatnonzero(ended)
-            writer.add({"obs": step.final_obs[ids], "action": zeros_action[ids], "reward": step.reward[ids],
-                        "first": np.zeros(len(ids), bool), "last": np.ones(len(ids), bool),
-                        "terminal": step.terminated[ids]}, version, env_ids=ids)
-            episode_returns += [float(running[i]) for i in ids]
-            running[ids] = 0.0
-            if log is not None:
-                log(t, episode_returns, metrics[-1] if metrics else {})
-        reward = np.where(step.first, 0.0, step.reward).astype(np.float32)
-        t += num_envs
-        out = writer.pop()
-        for i in range(len(out)):
-            store.append({**{k: v[i] for k, v in out.data.items()}, "mask": out.mask[i]})
-        if t % updates_every == 0 and len(store) >= batch_size:
-            pick = rng.integers(0, len(store), batch_size)
-            batch = {k: np.stack([store[j][k] for j in pick]) for k in store[0]}
-            batch["is_weight"] = np.ones(batch_size, np.float32)
-            metrics.append(learner.update(batch).metrics)
-            version += 1
-            policy.set_weights(learner.get_weights(), version)
-    venv.close()
-    algo.learner = learner  # type: ignore[attr-defined]
-    return algo, metrics, episode_returns
+    try:
+        while session.env_steps < env_steps:
+            session.collect(1)
+            if session.env_steps % updates_every == 0 and session.stored_count() >= batch_size:
+                metrics += session.train(1, batch_size)
+        algo.learner = session.learner  # type: ignore[attr-defined]
+        return algo, metrics, list(session.returns)
+    finally:
+        session.close()

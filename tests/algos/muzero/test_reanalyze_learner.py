@@ -37,7 +37,7 @@ def test_reanalyze_with_the_same_weights_reproduces_greedy_search():
     re = algo.make_reanalyzer()
     re.set_weights(loop.learner.get_weights(), 1)
     fresh = re.reanalyze(batch)
-    acting = batch["mask"] & ~batch["last"]
+    acting = batch["mask"].astype(bool) & ~batch["last"]  # replay hands the learner a float mask
     assert fresh["search_policy"].shape == batch["search_policy"].shape
     np.testing.assert_allclose(fresh["search_policy"][acting], batch["search_policy"][acting], atol=1e-6)
     np.testing.assert_allclose(fresh["search_value"][acting], batch["search_value"][acting], atol=1e-5)
@@ -62,7 +62,7 @@ def test_reanalyze_noise_keeps_every_legal_action_in_the_targets_of_a_peaked_pri
         weights = loop.learner.get_weights()
         weights["policy_head.2.bias"] = weights["policy_head.2.bias"] + np.array([30.0, 0.0], np.float32)  # prior ~ [1, 0]
         re.set_weights(weights, 1)
-        acting = batch["mask"] & ~batch["last"]
+        acting = batch["mask"].astype(bool) & ~batch["last"]  # replay hands the learner a float mask
         targets[noise] = re.reanalyze(batch)["search_policy"][acting]  # [N, A]
     assert (targets[False][:, 1] == 0).all()  # collapsed: action 1 never searched
     assert (targets[True][:, 1] > 0).mean() > 0.2

@@ -84,8 +84,9 @@ class Collector:
             return True
         return False
 
-    def run_segment(self, env_steps: int = 0, updates: int = 0) -> dict:
-        """Step every env `actors.segment_steps` times (unless the limiter holds us back)."""
+    def run_segment(self, env_steps: int = 0, updates: int = 0, explore: bool = True) -> dict:
+        """Step every env `actors.segment_steps` times (unless the limiter holds us back).
+        `explore=False` (tests, the local session) acts greedily, e.g. without root noise."""
         t0 = time.monotonic()
         stats: dict[str, Any] = {"index": self.index, "env_steps": 0, "episodes": [], "lengths": [],
                                  "inserted": 0, "limiter_blocked": False, **self.tag}
@@ -101,7 +102,7 @@ class Collector:
         E = self.venv.num_envs
         for _ in range(self.cfg.actors.segment_steps):
             s = self.step
-            actions, extras = self._act()
+            actions, extras = self._act(explore)
             # the reward that arrived with o_t: none at an episode's first step (base.py convention)
             record = {"obs": s.obs, "action": actions, "reward": np.where(s.first, 0.0, s.reward).astype(np.float32),
                       "first": s.first,
