@@ -55,3 +55,22 @@ def test_monitor_names_the_tensorboard_command(short_run):
     assert res.returncode == 0, res.stderr
     assert f"tensorboard --logdir {short_run.resolve() / TB_DIR}" in res.stdout
     assert "--host 127.0.0.1" in res.stdout
+
+
+def test_dream_video_lands_in_tensorboard(tmp_path):
+    """`wmdist dream` also writes its frames as a TensorBoard image sequence in the run."""
+    import imageio.v2 as imageio
+
+    from tests.runtime.run_dirs import run_dir_with_checkpoint
+    from wmdist.runtime.evaluate import dream_run
+    from wmdist.telemetry.tensorboard import read_image_tags
+
+    run = run_dir_with_checkpoint(tmp_path, "dreamerv3_cartpole")
+    assert dream_run(str(run), horizon=6, stream=io.StringIO()) == 0
+    frames = imageio.mimread(str(run / "dream.gif"))
+    assert "dream" in read_image_tags(run / TB_DIR)
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+    acc = EventAccumulator(str(run / TB_DIR), size_guidance={"images": 0})
+    acc.Reload()
+    assert len(acc.Images("dream")) == len(frames)

@@ -70,7 +70,23 @@ def evaluate_run(run_dir: str, episodes: int = 10, video: str | None = None, hum
           f"(mean length {np.mean(lengths):.0f})", file=out)
     if video:
         print(f"video: {record_video(cfg, algo, weights, version, video)}", file=out)
+        _to_tensorboard(run_dir, cfg, "eval_video", video)
     return 0
+
+
+def _to_tensorboard(run_dir: str, cfg, tag: str, gif_path: str) -> None:
+    """A video the run's commands wrote, also as an image sequence in the run's TensorBoard files."""
+    if not cfg.metrics.tensorboard:
+        return
+    import imageio.v2 as imageio
+
+    from wmdist.telemetry.tensorboard import TensorBoardLog
+
+    tb = TensorBoardLog(run_dir)
+    try:
+        tb.frames(tag, np.stack([np.asarray(f)[..., :3] for f in imageio.mimread(gif_path)]))
+    finally:
+        tb.close()
 
 
 def record_video(cfg, algo, weights, version: int, path: str, max_steps: int = 1000) -> str:
@@ -109,5 +125,6 @@ def dream_run(run_dir: str, out: str | None = None, horizon: int = 45, stream: I
         video = algo.dream_video(weights, env, path, context=5, horizon=horizon)
     except ImportError as err:
         raise ConfigError(f"dream cannot write the video: {err}") from None
+    _to_tensorboard(run_dir, cfg, "dream", video)
     print(f"wmdist: dream video {video}", file=stream)
     return 0
