@@ -59,6 +59,13 @@ DREAMER = ["run.max_updates=25", "replay.min_size=200", "learner.batch_size=8", 
 MUZERO = ["run.max_updates=40", "replay.min_size=300", "learner.batch_size=32"]
 SMOKE = {"muzero_atari.yaml", "dreamerv3_dmc_pixels.yaml", "planet_dmc_cartpole_swingup_pixels.yaml"}
 SMOKE.add("efficientzero_atari.yaml")
+# MinAtar: the Breakout presets take the default budgets; the Asterix ones are the same settings on
+# another game, so a smoke run each (small batches, a few updates) shows they start and train.
+MINATAR_SMOKE = ["run.max_updates=6", "replay.min_size=200", "learner.batch_size=8", "actors.envs_per_actor=4"]
+BUDGET.update({"dreamerv3_minatar_breakout.yaml": [*DREAMER, "actors.warmup_random_steps=200"],
+               "muzero_minatar_asterix.yaml": MINATAR_SMOKE,
+               "dreamerv3_minatar_asterix.yaml": [*MINATAR_SMOKE, "replay.seq_len=16", "actors.warmup_random_steps=200"]})
+SMOKE |= {"muzero_minatar_asterix.yaml", "dreamerv3_minatar_asterix.yaml"}
 SCORE_BATCHES = 6  # fixed batches each state is scored on
 
 

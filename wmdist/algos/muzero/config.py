@@ -27,6 +27,9 @@ class MuZeroConfig:
     conv_channels: int = param(256, "conv: channels of the residual towers (paper: 256)", ge=2)
     conv_blocks: int = param(16, "conv: residual blocks in each of h, g, f (paper: 16)", ge=0)
     conv_head_channels: int = param(2, "conv: channels of the 1x1 conv before each head", ge=1)
+    conv_stem: str = param("atari", "conv: representation input stage: atari = the paper's downsampling (96x96 -> 6x6); "
+                                    "grid = one 3x3 conv at full resolution (small grids such as MinAtar's 10x10)",
+                           choices=("atari", "grid"))
     value_support: int = param(300, "value atoms cover the integers [-S, S] after h(x) (paper: 300)", ge=1)
     reward_support: int = param(300, "reward atoms cover the integers [-S, S] after h(x) (paper: 300)", ge=1)
 

@@ -1,6 +1,8 @@
 """Convolutional MuZero networks for image observations (paper Appendix F, Atari).
 
-Representation: the Atari downsampling stack (96x96 -> 6x6) then a residual tower.
+Representation: the Atari downsampling stack (96x96 -> 6x6) then a residual tower; for
+small grids (MinAtar's 10x10, where four halvings would leave 1x1) a full-resolution
+3x3 conv stem instead (`stem="grid"`).
 Dynamics: the hidden state concatenated with one-hot action planes ([B, A, h, w]), a conv
 back to C channels, a residual tower. Heads: 1x1 convs, then small MLPs.
 Departure: the paper feeds 32 past frames plus 32 past-action planes; here the observation
@@ -35,6 +37,18 @@ class _Head(nn.Module):
         return self.fc(F.relu(self.bn(self.conv(x))).flatten(1))
 
 
+class GridStem(nn.Module):
+    """[B, Cin, H, W] -> [B, C, H, W]: one 3x3 conv, BN, ReLU; no downsampling."""
+
+    def __init__(self, in_channels: int, channels: int) -> None:
+        super().__init__()
+        self.conv = nn.Conv2d(in_channels, channels, 3, padding=1, bias=False)
+        self.bn = nn.BatchNorm2d(channels)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return F.relu(self.bn(self.conv(x)))
+
+
 class ConvNet(MuZeroNet):
     def __init__(
         self,
@@ -47,14 +61,20 @@ class ConvNet(MuZeroNet):
         value_atoms: int,
         reward_atoms: int,
         downsample_blocks: tuple[int, int, int] = (2, 3, 3),
+        stem: str = "atari",
     ) -> None:
         super().__init__()
         h, w, c = obs_shape
         self.num_actions = num_actions
-        self.down = AtariDownsample(c, channels, downsample_blocks)
         side = (h, w)
-        for _ in range(4):  # two strided convs and two strided pools
-            side = (_down(side[0]), _down(side[1]))
+        if stem == "grid":
+            self.down: nn.Module = GridStem(c, channels)
+        elif stem == "atari":
+            self.down = AtariDownsample(c, channels, downsample_blocks)
+            for _ in range(4):  # two strided convs and two strided pools
+                side = (_down(side[0]), _down(side[1]))
+        else:
+            raise ValueError(f"conv stem must be 'atari' or 'grid', got {stem!r}")
         self.repr_tower = res_tower(channels, blocks)
         self.dyn_conv = nn.Conv2d(channels + num_actions, channels, 3, padding=1, bias=False)
         self.dyn_bn = nn.BatchNorm2d(channels)
