@@ -122,3 +122,20 @@ def test_in_kernel_policy_and_action_match_the_numpy_reference(temperature: floa
     expected = policy.argmax(axis=1) if temperature == 0 else sample_actions(policy, rng)
     assert out.action.tolist() == expected.tolist()
     assert legal[np.arange(batch), out.action].all()
+
+
+@pytest.mark.parametrize("torch_latents", [False, True])
+def test_tuple_latents_staged_fast_or_by_the_general_path_agree(torch_latents: bool) -> None:
+    """A flat tuple of leaves (EfficientZero's (latent, h, c)) is staged leaf by leaf; a
+    leaf unlike the root's (here float64 steps, int32 ids) takes the general path, same result."""
+    config = SearchConfig(num_simulations=25, value_prefix=True, lstm_horizon=2)
+    model = HashModel(4, value_prefix=True, torch_latents=torch_latents)
+    fast = _search(model, 3, 7, config=config)
+
+    def odd_dtypes(latents, actions, reset):
+        r, v, logits, (ids, since) = model(latents, actions, reset)
+        if torch_latents:
+            return r, v, logits, (ids, since.double())  # float64: not the root's dtype
+        return r, v, logits, (ids.astype(np.int64), since.astype(np.float64))  # float64: not the root's dtype
+
+    _same(fast, _search(model, 3, 7, fn=odd_dtypes, config=config))

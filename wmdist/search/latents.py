@@ -121,6 +121,7 @@ class LatentStore:
         self.words = max(offset, 8) // 8  # W
         self._slots = slots
         self._first = leaves[0]
+        self._roots = leaves  # the root leaves, until bind() built the stagers
 
     def bind(self, io: np.ndarray) -> None:
         """Attach the io rows ([2, B, W] 8-byte words: staged, gathered) of a search buffer."""
@@ -134,31 +135,58 @@ class LatentStore:
         self.stage = self._stage_general
         if self._spec is None:
             self.stage = self._one_leaf_stager(self._typed_view(io[STAGED], slots[0]), self._first)
+        elif self._spec[0] is tuple and all(c is None for c in self._spec[1]):
+            # A flat tuple of leaves (EfficientZero's (latent, h, c)): one fast copy per leaf.
+            stagers = [self._one_leaf_stager(self._typed_view(io[STAGED], slot), leaf, fallback=self._stage_general)
+                       for slot, leaf in zip(slots, self._roots)]
+            self.stage = self._tuple_stager(stagers)
         self._first = None
+        self._roots = None
 
-    def _one_leaf_stager(self, dst: Any, root: Any) -> Callable[[Any], None]:
+    def _tuple_stager(self, stagers: list) -> Callable[[Any], None]:
+        """stage() for a flat tuple: each leaf through its own one-leaf stager (whose general
+        path, for anything unlike the root's leaf, re-stages the whole tuple)."""
+        general, n = self._stage_general, len(stagers)
+
+        def stage_tuple(latents: Any) -> None:
+            if type(latents) is not tuple or len(latents) != n:
+                general(latents)
+                return
+            for stager, leaf in zip(stagers, latents):
+                if stager(leaf, latents):
+                    return  # the whole tuple went through the general path
+
+        return stage_tuple
+
+    def _one_leaf_stager(self, dst: Any, root: Any, fallback: Callable[[Any], None] | None = None) -> Callable:
         """stage() for a single leaf: the checks and the copy inline, the general path
-        for anything that does not look like the root."""
+        for anything that does not look like the root. As a leaf of a tuple (`fallback`
+        given), it is called as (leaf, whole) and returns True when it staged `whole` by the
+        general path instead."""
         general, dtype, shape = self._stage_general, root.dtype, tuple(root.shape)
-        if self._slots[0].is_torch:
+        if fallback is not None:
+            general = fallback
+        if _is_tensor(root):
             tensor = torch.Tensor
 
-            def stage_tensor(latents: Any) -> None:
+            def stage_tensor(latents: Any, whole: Any = None) -> bool:
                 # a grad-tracking copy_ would build a graph: the general path detaches
                 if (isinstance(latents, tensor) and latents.dtype is dtype and latents.shape == shape
                         and not latents.requires_grad):
                     dst.copy_(latents)
-                else:
-                    general(latents)
+                    return False
+                general(latents if whole is None else whole)
+                return True
 
             return stage_tensor
         ndarray = np.ndarray
 
-        def stage_array(latents: Any) -> None:
+        def stage_array(latents: Any, whole: Any = None) -> bool:
             if type(latents) is ndarray and latents.dtype is dtype and latents.shape == shape:
                 dst[...] = latents
-            else:
-                general(latents)
+                return False
+            general(latents if whole is None else whole)
+            return True
 
         return stage_array
 
