@@ -127,3 +127,17 @@ def test_bad_planner_config_is_one_line():
     with pytest.raises(ValueError, match="top_k") as err:
         _plan([1.0], [0.0], [-1.0], [1.0], cfg=CEMConfig(candidates=10, top_k=20))
     assert "\n" not in str(err.value)
+
+
+def test_the_same_planner_serves_a_goal_cost():
+    """Score = minus the distance of the rollout's last state to a per-row goal (as a goal
+    embedding would be): a 2-D point x' = x + a from the origin ends at its row's goal."""
+    goals = torch.tensor([[1.5, -0.5], [-2.0, 2.5]])  # [E, 2], reachable in H = 4 steps of |a| <= 1
+
+    def goal_score(actions: torch.Tensor) -> torch.Tensor:  # [E, J, H, 2] -> [E, J]
+        final = actions.sum(2)  # x_H from x_0 = 0
+        return -(final - goals[:, None]).norm(dim=-1)
+
+    low, high = -torch.ones(2, 2), torch.ones(2, 2)
+    out = cem_plan(goal_score, low, high, CFG, torch.Generator().manual_seed(0))
+    np.testing.assert_allclose(out.mean.sum(1).numpy(), goals.numpy(), atol=0.05)
