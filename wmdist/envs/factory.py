@@ -5,6 +5,8 @@
     atari:<Game>             atari:Pong, atari:Breakout (ALE, standard preprocessing)
     minatar:<Game>           minatar:Breakout, minatar:Asterix (MinAtar 10x10 grids)
     board:<game>             board:tictactoe, board:connect4 (two players)
+    carracing:CarRacing-v3   gymnasium's car racing from 64x64 pixels (World Models)
+    vizdoom:<Scenario>       vizdoom:TakeCover from 64x64 pixels (World Models)
 """
 from __future__ import annotations
 
@@ -24,6 +26,8 @@ _FAMILIES: dict[str, str] = {
     "minatar": "MinAtar 10x10 game: minatar:Asterix, minatar:Breakout, minatar:Freeway, minatar:Seaquest, "
                "minatar:SpaceInvaders",
     "board": "two-player board games: board:tictactoe, board:connect4",
+    "carracing": "gymnasium's Box2D car racing from image_size pixels: carracing:CarRacing-v3",
+    "vizdoom": "ViZDoom scenario from image_size pixels: vizdoom:TakeCover",
 }
 
 
@@ -50,6 +54,14 @@ def _names(family: str) -> list[str]:
         from wmdist.envs.minatar import minatar_games
 
         return minatar_games()
+    if family == "carracing":
+        from wmdist.envs.carracing import carracing_names
+
+        return carracing_names()
+    if family == "vizdoom":
+        from wmdist.envs.vizdoom_env import vizdoom_names
+
+        return vizdoom_names()
     from wmdist.envs.boardgames.game import GAMES
 
     return list(GAMES)
@@ -61,7 +73,8 @@ def _unknown(env_id: str, candidates: list[str]) -> ValueError:
     hint = f"closest match: '{lowered[close[0]]}'" if close else "no close match"
     return ValueError(
         f"unknown env id '{env_id}' ({hint}); families: gym:<gymnasium id>, "
-        "dmc:<domain>-<task>, atari:<Game>, minatar:<Game>, board:tictactoe|connect4"
+        "dmc:<domain>-<task>, atari:<Game>, minatar:<Game>, board:tictactoe|connect4, "
+        "carracing:CarRacing-v3, vizdoom:TakeCover"
     )
 
 
@@ -131,6 +144,14 @@ def make_env(cfg: EnvConfig, seed: int) -> Env:
         from wmdist.envs.minatar import MinAtarEnv
 
         return MinAtarEnv(cfg, seed, name)
+    if family == "carracing":
+        from wmdist.envs.carracing import CarRacingEnv
+
+        return CarRacingEnv(cfg, seed, name)
+    if family == "vizdoom":
+        from wmdist.envs.vizdoom_env import VizDoomEnv
+
+        return VizDoomEnv(cfg, seed, name)
     if cfg.action_repeat != 1:
         raise ValueError(f"env.action_repeat must be 1 for board games, got {cfg.action_repeat}")
     from wmdist.envs.boardgames.env import BoardEnv
