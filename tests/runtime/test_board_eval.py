@@ -106,3 +106,33 @@ def test_connect4_default_opponent_is_mcts_and_beats_a_random_agent() -> None:
     assert isinstance(opponent.__self__, MCTSOpponent) and opponent.__self__.rollouts == 30
     s = summary(play_games(RandomPolicy(), env, 6, opponent))
     assert s["lost_p0"] + s["lost_p1"] >= 5
+
+
+def test_the_evaluator_role_and_wmdist_eval_report_lines_lost(tmp_path):
+    """The in-training evaluator reports the whole-tree judgement beside the games (eval_lost_lines,
+    eval_lines reach metrics.jsonl), and `wmdist eval` prints it per side."""
+    import io
+
+    from tests.runtime.run_dirs import run_dir_with_checkpoint
+    from wmdist.runtime.calls import LocalHandle, Ready
+    from wmdist.runtime.evaluate import evaluate_run, load_run
+    from wmdist.runtime.roles.evaluator import EvaluatorRole
+    from wmdist.runtime.roles.weights import WeightBroker
+
+    run = run_dir_with_checkpoint(tmp_path, "muzero_tictactoe", ["eval.episodes=2", "algo.search.num_simulations=4"])
+    cfg, spec, _algo, version, weights, _ = load_run(str(run))
+    broker = WeightBroker()
+    broker.publish(version, [Ready(weights)])  # as the local runner publishes
+    res = EvaluatorRole(cfg, spec, LocalHandle(broker)).evaluate()
+    assert len(res["returns"]) == 2
+    assert res["eval_lines"] > 0 and 0 <= res["eval_lost_lines"] <= res["eval_lines"]
+    out = io.StringIO()
+    assert evaluate_run(str(run), episodes=2, out=out) == 0
+    text = out.getvalue()
+    # (an untrained net's search ties break by each policy's own seed: the counts differ between the two)
+    sides = [line.split(": ", 1)[1] for line in text.splitlines() if line.startswith("every line")]
+    assert len(sides) == 2
+    for side in sides:
+        won, drawn, lost = (int(part.split()[0]) for part in side.split(", "))
+        assert won + drawn + lost > 0
+

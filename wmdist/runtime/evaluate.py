@@ -12,7 +12,7 @@ import numpy as np
 from wmdist.algos.base import PREDICTS_OBSERVATIONS
 from wmdist.config.errors import ConfigError
 from wmdist.runtime import checkpoint as ck
-from wmdist.runtime.board_eval import default_opponent, greedy_action, play_games
+from wmdist.runtime.board_eval import default_opponent, greedy_action, judge_lines, play_games
 from wmdist.runtime.roles.setup import build_algorithm
 from wmdist.runtime.train import env_spec_or_error, load_run_config
 
@@ -53,12 +53,14 @@ def evaluate_run(run_dir: str, episodes: int = 10, video: str | None = None, hum
         from wmdist.envs.factory import make_env
 
         env = make_env(cfg.env, cfg.run.seed)
-        opponent = _human(env, out) if human else default_opponent(env, cfg.run.seed)
+        opponent = _human(env, out) if human else default_opponent(env, cfg.run.seed, cfg.eval.opponent_rollouts)
         outcomes = play_games(policy, env, episodes, opponent)
         for p, rs in outcomes.items():
             rs = np.asarray(rs)
             print(f"agent as player {p}: {len(rs)} games, won {(rs > 0).sum()}, drew {(rs == 0).sum()}, "
                   f"lost {(rs < 0).sum()}", file=out)
+        if env.game.name == "tictactoe" and not human:
+            _print_lines(judge_lines(policy, env), out)
         return 0
     from wmdist.envs.vector import make_vector_env
     from wmdist.runtime.roles.evaluator import play_episodes
@@ -87,6 +89,15 @@ def _to_tensorboard(run_dir: str, cfg, tag: str, gif_path: str) -> None:
         tb.frames(tag, np.stack([np.asarray(f)[..., :3] for f in imageio.mimread(gif_path)]))
     finally:
         tb.close()
+
+
+def _print_lines(lines: dict, out: IO[str]) -> None:
+    """The whole-tree judgement: every opponent reply at every turn against the greedy agent."""
+    for p in (0, 1):
+        print(f"every line, agent as player {p}: {lines[f'won_lines_p{p}']} won, {lines[f'drawn_lines_p{p}']} drawn, "
+              f"{lines[f'lost_lines_p{p}']} lost", file=out)
+    for moves in lines["losing_lines"]:
+        print(f"  a losing line (moves, squares 0-8): {' '.join(str(m) for m in moves)}", file=out)
 
 
 def record_video(cfg, algo, weights, version: int, path: str, max_steps: int = 1000) -> str:

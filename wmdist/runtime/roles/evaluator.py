@@ -62,7 +62,7 @@ class EvaluatorRole:
             from wmdist.runtime.board_eval import default_opponent
 
             self.board = make_env(cfg.env, seed)
-            self.opponent = default_opponent(self.board, seed)
+            self.opponent = default_opponent(self.board, seed, cfg.eval.opponent_rollouts)
         else:
             self.venv = make_vector_env(cfg.env, min(cfg.eval.envs, cfg.eval.episodes), seed)
         self.version = -1
@@ -73,16 +73,29 @@ class EvaluatorRole:
         if weights is not None:
             self.policy.set_weights(weights, version)
             self.version = version
+        extra: dict = {}
         if self.board is not None:
             from wmdist.runtime.board_eval import play_games
 
             outcomes = play_games(self.policy, self.board, self.cfg.eval.episodes, self.opponent)
             returns = outcomes[0] + outcomes[1]
             lengths = [0] * len(returns)
+            extra = self._judge()
         else:
             returns, lengths = play_episodes(self.policy, self.venv, self.cfg.eval.episodes)
         return {"version": self.version, "returns": returns, "lengths": lengths,
-                "busy_seconds": time.monotonic() - t0, **self.tag}
+                "busy_seconds": time.monotonic() - t0, **extra, **self.tag}
+
+    def _judge(self) -> dict:
+        """Games small enough to enumerate (tic-tac-toe) are also judged over every opponent line:
+        an opponent that only plays optimal moves never reaches the positions a blunder opens.
+        Reported as eval_lost_lines / eval_lines (metrics.jsonl, TensorBoard)."""
+        if self.board.game.name != "tictactoe":
+            return {}
+        from wmdist.runtime.board_eval import judge_lines
+
+        lines = judge_lines(self.policy, self.board)
+        return {"eval_lost_lines": int(lines["lost_lines"]), "eval_lines": int(lines["lines"])}
 
     def ping(self) -> bool:
         return True
