@@ -15,6 +15,11 @@ def test_ids_listed_and_bad_name_is_one_line():
     with pytest.raises(ValueError, match="closest match: 'minatar:Breakout'") as err:
         check_id("minatar:breakot")
     assert "\n" not in str(err.value)
+    # wmdist drives minatar.Environment itself: the package's gymnasium ids stay unregistered
+    import gymnasium as gym
+
+    make_env(EnvConfig(id="minatar:Breakout"), seed=0).close()
+    assert not any(k.startswith("MinAtar/") for k in gym.registry)
 
 
 @pytest.mark.parametrize("game,channels", [("Breakout", 4), ("Asterix", 4), ("Seaquest", 10),
