@@ -14,7 +14,8 @@ Cases: B in {1, 8, 64, 256} roots, A in {2, 18} actions, 50 simulations, pUCT.
   that B, and `search_cpu_vs_forwards_only` = search CPU time / CPU time of the same 50
   forward passes alone (1.0 = the tree is free).
 - kind "mlp_lstm": the MLP plus a value-prefix LSTM cell (hidden 64) whose state is zeroed
-  at the reset flags and kept with each node's latent (EfficientZero's search).
+  at the reset flags and kept with each node's latent (EfficientZero's search); its
+  forward-only figures include the cell.
 Times are the best of many repeats (at least `repeats`, then until ~1 s has passed),
 measured twice: wall clock and this thread's CPU time (`*_cpu` fields: what the search
 costs when the machine is shared with other processes, which only deschedule it).
@@ -107,16 +108,21 @@ def _roots(batch: int, num_actions: int, rng: np.random.Generator):
 IDLE_FORWARD_PER_S = 8400.0  # issue 3: B=64 forward passes/s of this MLP, one thread, idle machine
 
 
-def _forward_rate(batch: int, num_actions: int, repeats: int) -> float:
-    """Batched forward passes of the MLP model per CPU second (one thread)."""
+def _forward_rate(batch: int, num_actions: int, repeats: int, lstm: bool = False) -> float:
+    """Batched forward passes of the MLP model (with `lstm`, plus the value-prefix cell) per
+    CPU second (one thread)."""
     torch.manual_seed(0)
     net = _MLPModel(num_actions).eval()
+    cell = nn.LSTMCell(LATENT, LSTM_HIDDEN).eval()
     latent, actions = torch.randn(batch, LATENT), torch.zeros(batch, dtype=torch.long)
+    state = (torch.zeros(batch, LSTM_HIDDEN), torch.zeros(batch, LSTM_HIDDEN))
 
     def forwards():
         with torch.no_grad():
             for _ in range(SIMS):
-                net(latent, actions)
+                nxt = net(latent, actions)[3]
+                if lstm:
+                    cell(nxt, state)
 
     return SIMS / _best_time(forwards, repeats, min_total=0.3)[1]
 
@@ -198,7 +204,7 @@ def _mlp_case(batch: int, num_actions: int, repeats: int, lstm: bool = False) ->
         cpu = time.thread_time() - c0
         if cpu < best_cpu:
             best_cpu, best_share = cpu, 1.0 - model_cpu[0] / cpu
-    fwd_cpu = SIMS / _forward_rate(batch, num_actions, repeats)
+    fwd_cpu = SIMS / _forward_rate(batch, num_actions, repeats, lstm)
     return {"kind": "mlp_lstm" if lstm else "mlp", "B": batch, "A": num_actions, "sims": SIMS,
             "sims_per_s": round(batch * SIMS / best),
             "sims_per_cpu_s": round(batch * SIMS / best_cpu), "ms_per_search": round(best * 1e3, 3),

@@ -5,10 +5,9 @@ import numpy as np
 import pytest
 import torch
 
-from tests.algos.efficientzero.common import SPEC, small_algo
+from tests.algos.efficientzero.common import small_algo
 from wmdist.algos.muzero.config import MuZeroConfig
 from wmdist.algos.muzero.searcher import Searcher
-from wmdist.config.loader import load_config
 from wmdist.nets.support import support_to_scalar
 from wmdist.search.api import SearchConfig
 from wmdist.search.noise import sample_root_noise
