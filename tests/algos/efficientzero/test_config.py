@@ -43,3 +43,11 @@ def test_every_addition_switched_off_is_muzero_reanalyze():
     assert net.prefix is None and net.consistency is None and net.base.reward_head is not None
     cfg_on = load_config(CONFIGS / "efficientzero_cartpole.yaml")
     assert cfg_on.algo.search.value_prefix and cfg_on.algo.search.lstm_horizon == 5
+
+
+def test_value_prefix_on_a_two_player_game_is_a_config_error():
+    cfg = load_config(CONFIGS / "muzero_tictactoe.yaml", ["algo.name=efficientzero", "reanalyze.num=1",
+                                                          "algo.augment_symmetries=false"])
+    with pytest.raises(ConfigError) as err:
+        check_env_and_algo(cfg)
+    assert "two players" in _one_line(err)

@@ -25,6 +25,13 @@ class EfficientZero(MuZero):
     def __init__(self, spec, config: EfficientZeroConfig | None = None, seed: int = 0) -> None:
         super().__init__(spec, config if config is not None else EfficientZeroConfig(), seed)
 
+    def validate(self) -> None:
+        super().validate()
+        if self.spec.players == 2 and self.config.value_prefix:
+            # the movers' rewards alternate in sign, so a sum of them since a reset means nothing
+            raise ValueError(f"algo.value_prefix is for one-player envs; {self.spec.id} has two players "
+                             f"(set algo.value_prefix: false)")
+
     def check_run(self, run: Any) -> None:
         self.config.check_run(run)
 

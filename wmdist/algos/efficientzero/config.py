@@ -44,8 +44,9 @@ class EfficientZeroConfig(MuZeroConfig):
     off_policy_training_steps: int = param(
         100_000, "the run's total training steps that tau scales (authors: 100k, so tau = 30k transitions)", ge=1)
     off_policy_bootstrap: str = param(
-        "net", "value at t + l: the reanalyzer's current network ('net', as the authors run it) or a fresh "
-               "noise-free root search ('search')", choices=("net", "search"))
+        "net", "value at t + l: the network's ('net': the reanalyzer's weights, the learner's latest published "
+               "ones, i.e. a target network refreshed at each publication, as the authors run it) or a fresh "
+               "noise-free root search's ('search')", choices=("net", "search"))
     reanalyze_policy_fraction: float = param(
         0.99, "share of reanalyzed sequences whose policy targets a fresh search refreshes (authors: 0.99)", ge=0, le=1)
 
