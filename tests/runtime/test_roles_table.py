@@ -88,3 +88,12 @@ def test_toy_role_runs_on_ray_is_restarted_and_reported(ray_session, tmp_path):
         assert snap["wmdist_actor_restarts_total{role=toy}"] >= 1
     finally:
         topo.shutdown()
+
+
+def test_every_metric_a_role_reports_is_declared():
+    from wmdist.telemetry.metrics import METRICS
+    from wmdist.runtime.table import BUILTIN
+
+    for role in BUILTIN:
+        for name in role.metrics:
+            assert name in METRICS, (role.name, name)
