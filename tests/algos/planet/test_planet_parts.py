@@ -76,6 +76,20 @@ def test_policy_plans_for_every_env_within_the_bounds_and_noise_only_when_explor
     assert np.isin(planned, [-1.0, 1.0, 0.0, 2.0]).mean() < 0.5  # the plan's mean of the elites, no noise
 
 
+def test_untrained_collector_acts_at_random_without_planning(monkeypatch):
+    import wmdist.algos.planet.policy as policy_module
+
+    algo = PlaNet(SPEC, PlaNetConfig(**TINY))
+    policy = algo.make_policy()
+    policy.set_weights(algo.make_learner().get_weights(), 0)  # the learner's initial snapshot
+    monkeypatch.setattr(policy_module, "cem_plan", lambda *a, **k: pytest.fail("planned with an untrained model"))
+    obs = np.zeros((64, 5), np.float32)
+    action, _ = policy.act(obs, np.ones(64, bool), None, None, True)
+    assert action[:, 0].min() < -0.5 and action[:, 0].max() > 0.5  # uniform over [-1, 1]
+    assert action[:, 1].min() < 0.5 and action[:, 1].max() > 1.5 and (action[:, 1] >= 0).all()  # over [0, 2]
+    assert policy.h is not None and torch.isfinite(policy.h).all()  # the posterior still followed the observation
+
+
 def test_warm_start_policy_keeps_the_shifted_plan():
     cfg = PlaNetConfig(**{**TINY, "planner": CEMConfig(horizon=3, candidates=20, top_k=4, iterations=2, warm_start=True)})
     policy = PlaNet(SPEC, cfg).make_policy()

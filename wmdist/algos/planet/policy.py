@@ -3,6 +3,10 @@ for all E envs at once (one batched planning call per step).
 
 Collecting (explore=True) adds N(0, expl_noise) to the planned action (PlaNet: 0.3) and
 clips it to the bounds; the evaluator (explore=False) takes the planned action as is.
+Until the learner has published trained weights (version 0 is its initial snapshot) a
+collector's plan would be arbitrary, so it acts uniformly at random instead, as in PlaNet's
+seed episodes, and spends no time planning (the runtime asks for actions during its random
+warm-up too); the posterior still follows every observation.
 """
 from __future__ import annotations
 
@@ -52,6 +56,10 @@ class PlaNetPolicy(Policy):
         keep = (~restart).float().unsqueeze(-1)  # [E, 1]
         h, z = self.wm.filter_step(self.h, self.z, self.prev_action, obs_t, keep, self.generator)
         a_dim, planner = self.spec.action_dim, self.cfg.planner
+        if explore and self.version <= 0:  # an untrained model: a seed-episode action, no planning
+            action = torch.rand((e, a_dim), generator=self.generator, device=self.device) * 2 - 1
+            self.h, self.z, self.prev_action, self.plan = h, z, action, None
+            return action_to_env(action, self.spec), {}
         low = torch.full((e, a_dim), -1.0, device=self.device)  # model space: every bound maps to [-1, 1]
         high = torch.ones_like(low)
         init = None
