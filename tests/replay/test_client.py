@@ -263,3 +263,26 @@ def test_redis_sample_sees_own_writes_and_redraws_stale_draws(started, monkeypat
     assert st["drops_corrupt"] == 0 and st["size_sequences"] == 24
     assert c.update_priorities(old.keys, old.stamps, np.ones(8)) == 0  # stamps still catch stale write-backs
     assert c.stats()["drops_stale_priority"] == 8
+
+
+@pytest.mark.parametrize("backend", ["memory", "redis"])
+def test_samples_carry_each_steps_age_and_beta_anneals(started, backend):
+    """Ages (transitions stored after each step) reach the sampler on both paths; beta rises
+    from priority_beta to 1 over priority_beta_anneal_samples learner batches."""
+    c = started(_cfg(backend=backend, shards=1, sampler="prioritized", priority_alpha=1.0, priority_beta=0.0,
+                     priority_beta_anneal_samples=2), name=f"age{backend}")
+    steps = [T, 3, 5]
+    assert c.insert(make_batch(3, steps=np.array(steps)), source_id=0)
+    order = [(i, t) for i, n in enumerate(steps) for t in range(n)]  # storage order
+    want = {(i, t): len(order) - 1 - k for k, (i, t) in enumerate(order)}
+    s = c.sample(64, limited=False)
+    for row, i in enumerate(_ids(s)):
+        assert s.age[row, :steps[i]].tolist() == [want[(i, t)] for t in range(steps[i])]
+    keys = {i: (k, st) for k, st, i in zip(s.keys, s.stamps, _ids(s))}
+    assert c.update_priorities(np.array([keys[i][0] for i in range(3)]), np.array([keys[i][1] for i in range(3)]),
+                               np.array([1.0, 2.0, 4.0])) == 3
+    assert np.allclose(c.sample(64).is_weight, 1.0)  # beta 0 at the first learner batch
+    c.sample(64)
+    x = c.sample(64)  # two batches done: beta = 1
+    w = (3 * np.array([1.0, 2.0, 4.0])[_ids(x)] / 7.0) ** -1.0
+    assert np.allclose(x.is_weight, w / w.max(), rtol=1e-5)

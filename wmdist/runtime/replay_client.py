@@ -202,11 +202,12 @@ class ReplayClient:
                 return None
         except RayActorError:
             return None
-        self._batches += int(limited)
         try:
             return self._sample_direct(batch_size, limited) if self.direct else self._sample(batch_size)
         except RayActorError:
             return None  # the service was shut down
+        finally:
+            self._batches += int(limited)  # beta counts the batches before this one
 
     def _count_samples(self, n: int) -> None:
         """Warm and ratio off, the count gates nothing: sent at most every 50 ms."""
