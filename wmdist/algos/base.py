@@ -117,6 +117,11 @@ class Learner(ABC):
     def load_state_dict(self, state: Mapping[str, Any]) -> None:
         """Restore what `state_dict` returned."""
 
+    def use_services(self, services: Mapping[str, list]) -> None:
+        """Handed, once at start, the actors of the algorithm's roles that serve the learner
+        (`Role.serves_learner`, e.g. an evaluation pool) by role name; call them through
+        `wmdist.runtime.calls`. Ignored by default."""
+
 
 class Reanalyzer(ABC):
     """Refreshes stored targets with newer weights (MuZero Reanalyze, EfficientZero)."""

@@ -10,6 +10,7 @@ ALGORITHMS: dict[str, str] = {
     "dreamer": "wmdist.algos.dreamer:Dreamer",
     "planet": "wmdist.algos.planet:PlaNet",
     "efficientzero": "wmdist.algos.efficientzero:EfficientZero",
+    "worldmodels": "wmdist.algos.worldmodels:WorldModels",
 }
 
 

@@ -83,6 +83,8 @@ class Role:
     ready_first: bool = False  # its actors answer a ping before later roles start (the learner
     #                            publishes weight version 0 before anyone acts)
     metrics: tuple[str, ...] = ("wmdist_busy_seconds_total", "wmdist_actor_restarts_total")
+    serves_learner: bool = False  # built before the learner, whose Learner gets its handles
+    #                               (`Learner.use_services`): an algorithm's evaluation pool
 
     def resources_of(self, cfg: RunConfig) -> RoleResources:
         return self.resources(self.section(cfg))
@@ -171,7 +173,7 @@ BUILTIN: tuple[Role, ...] = (
          lambda sec: RoleResources(0.0, custom=dict(sec.resources)), schedule=SERVICE, max_restarts=lambda cfg: 0,
          options={"max_concurrency": 64}, owner="replay", metrics=()),
     Role("learner", _learner_cls, lambda cfg: cfg.learner, lambda cfg: 1, _sized,
-         args=lambda ctx, i, res: (ctx.cfg, ctx.spec, ctx.replay, ctx.broker, res.threads),
+         args=lambda ctx, i, res: (ctx.cfg, ctx.spec, ctx.replay, ctx.broker, res.threads, dict(ctx.actors)),
          max_restarts=lambda cfg: 0, schedule=LOOP, fatal=True, options={"max_concurrency": 1}, ready_first=True,
          call=lambda a, d: a.train_for.remote(d.learner_slice, d.cfg.run.max_updates),
          handle=_learner_answer, metrics=("wmdist_busy_seconds_total", "wmdist_learner_updates_total")),

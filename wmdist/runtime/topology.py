@@ -153,7 +153,8 @@ def build(cfg: RunConfig, spec: EnvSpec, run_dir: Path, fields: dict, local: boo
     topo = Topology(cfg, spec, run_dir, replay, broker, table, local=local)
     ctx = Context(cfg, spec, replay, broker, topo.actors)
     try:
-        for role in table:
+        # roles that serve the learner come first: the learner is handed their actors (ctx.actors)
+        for role in sorted(table, key=lambda r: not r.serves_learner):
             if role.owner != "topology":
                 continue  # replay's shards and limiter: created with replay above
             res = role.resources_of(cfg)

@@ -64,12 +64,15 @@ class Prefetcher:
 
 
 class LearnerRole:
-    def __init__(self, cfg: RunConfig, spec: EnvSpec, replay: Any, broker: Any, threads: int = 1) -> None:
+    def __init__(self, cfg: RunConfig, spec: EnvSpec, replay: Any, broker: Any, threads: int = 1,
+                 services: dict[str, list[Any]] | None = None) -> None:
         set_threads(threads)
         self.cfg, self.replay, self.broker = cfg, replay, broker
         self.device = device_for(cfg.learner.gpus)
         self.algo = build_algorithm(cfg, spec, cfg.run.seed)
         self.learner = self.algo.make_learner(self.device)
+        if services:  # the actors of roles that serve the learner (`Role.serves_learner`), by role name
+            self.learner.use_services(services)
         self.updates = 0
         self.version = 0
         self.nan_skips = 0

@@ -1,0 +1,190 @@
+"""World Models' staged learner: V, then M, then CMA-ES on C (one generation per update call).
+
+Stage 1 (`vae_updates` calls): V on the batch's frames (vae.py's loss).
+Stage 2 (`rnn_updates` calls): M on V's sampled latents of each sequence: from [z_t, a_t] it
+    predicts z_{t+1} (mixture NLL, mdn.py) and whether o_{t+1} is terminal (done head).
+Stage 3: one CMA-ES generation per call: the pool (role `wm_eval`, handed over by the runtime as
+    a service) scores `popsize` candidates on `rollouts` rollouts each, in the dream or the env.
+The published weights carry V, M and the best controller so far (`controller`, `has_controller`),
+which the collectors then act with.
+"""
+from __future__ import annotations
+
+import time
+from typing import Any, Mapping
+
+import numpy as np
+import torch
+
+from wmdist.algos.base import Batch, Learner, NonFiniteLoss, UpdateResult, Weights
+from wmdist.algos.worldmodels.cmaes import CMAES
+from wmdist.algos.worldmodels.config import WorldModelsConfig
+from wmdist.algos.worldmodels.controller import num_params
+from wmdist.algos.worldmodels.mdn import mdn_log_prob
+from wmdist.algos.worldmodels.models import build_rnn, build_vae, to_numpy
+from wmdist.algos.worldmodels.pool import EvalPool
+from wmdist.algos.worldmodels.vae import ConvVAE, vae_loss, vae_terms
+from wmdist.envs.spec import EnvSpec
+from wmdist.nets.actions import action_to_model
+from wmdist.nets.optim import GuardedStep, OptimConfig
+
+POOL_ROLE = "wm_eval"
+STAGE_VAE, STAGE_RNN, STAGE_CMA, STAGE_DONE = 0, 1, 2, 3
+
+
+class WorldModelsLearner(Learner):
+    def __init__(self, cfg: WorldModelsConfig, spec: EnvSpec, device: str = "cpu", seed: int = 0) -> None:
+        self.cfg, self.spec, self.device, self.seed = cfg, spec, torch.device(device), seed
+        torch.manual_seed(seed)
+        self.vae = build_vae(cfg, spec).to(self.device)
+        self.rnn = build_rnn(cfg, spec).to(self.device)
+        self.vae_opt = GuardedStep(self.vae.parameters(), OptimConfig(kind="adam", lr=cfg.vae_lr))
+        self.rnn_opt = GuardedStep(self.rnn.parameters(), OptimConfig(kind="adam", lr=cfg.rnn_lr, clip_norm=cfg.rnn_clip))
+        self.generator = torch.Generator(self.device).manual_seed(seed)
+        self.n_params = num_params(spec, cfg.z_dim, cfg.rnn_hidden)
+        self.cma = CMAES(self.n_params, cfg.popsize, cfg.sigma0, seed)
+        self.bank_mu = np.zeros((0, cfg.z_dim), np.float32)  # [K, Z] first frames' encodings (dream starts)
+        self.bank_logvar = np.zeros((0, cfg.z_dim), np.float32)
+        self.updates = 0
+        self.pool: EvalPool | None = None
+
+    # -- the evaluation pool -----------------------------------------------------------------
+    def use_services(self, services: Mapping[str, list]) -> None:
+        handles = list(services.get(POOL_ROLE, []))
+        if handles:
+            self.pool = EvalPool(handles, self.cfg.pool_max_retries)
+
+    def _pool(self) -> EvalPool:
+        if self.pool is None:  # eval_actors = 0 (or a learner built outside a run): dream here
+            from wmdist.algos.worldmodels.worker import EvalWorker
+            from wmdist.runtime.calls import LocalHandle
+
+            self.pool = EvalPool([LocalHandle(EvalWorker(None, self.spec, 0, 0, algo_config=self.cfg))],
+                                 self.cfg.pool_max_retries)
+        return self.pool
+
+    @property
+    def stage(self) -> int:
+        c = self.cfg
+        if self.updates < c.vae_updates:
+            return STAGE_VAE
+        if self.updates < c.vae_updates + c.rnn_updates:
+            return STAGE_RNN
+        return STAGE_CMA if (c.generations == 0 or self.cma.generation < c.generations) else STAGE_DONE
+
+    @property
+    def model_id(self) -> int:
+        """V and M are fixed from stage 3 on: the pool's actors cache them under this id."""
+        return self.cfg.vae_updates + self.cfg.rnn_updates + 1
+
+    # -- stage 1: V --------------------------------------------------------------------------
+    def _frames(self, batch: Batch) -> torch.Tensor:
+        mask = np.asarray(batch["mask"], bool)  # [B, T]
+        frames = np.asarray(batch["obs"])[mask]  # [N, 64, 64, C] real steps only
+        if self.cfg.vae_frames and len(frames) > self.cfg.vae_frames:
+            idx = torch.randperm(len(frames), generator=self.generator)[: self.cfg.vae_frames].numpy()
+            frames = frames[np.sort(idx)]
+        return torch.as_tensor(frames, device=self.device)
+
+    def vae_step(self, batch: Batch) -> dict[str, float]:
+        obs = self._frames(batch)
+        mu, logvar = self.vae.encode(obs)
+        recon = self.vae.decode(ConvVAE.sample(mu, logvar, self.generator))
+        rec, kl = vae_terms(mu, logvar, recon, obs)
+        loss = vae_loss(rec, kl, self.cfg.kl_tolerance, self.cfg.z_dim)
+        if not torch.isfinite(loss.detach()):
+            raise NonFiniteLoss(f"VAE loss is {float(loss.detach())}")
+        grad = self.vae_opt(loss)
+        return {"loss": float(loss.detach()), "vae_recon": float(rec.detach().mean()), "vae_kl": float(kl.detach().mean()),
+                "vae_grad_norm": grad}
+
+    # -- stage 2: M --------------------------------------------------------------------------
+    def rnn_step(self, batch: Batch) -> dict[str, float]:
+        obs = torch.as_tensor(np.asarray(batch["obs"]), device=self.device)  # [B, T, 64, 64, C]
+        b, t_len = obs.shape[:2]
+        mask = torch.as_tensor(np.asarray(batch["mask"]), device=self.device).float()  # [B, T]
+        first = torch.as_tensor(np.asarray(batch["first"]), device=self.device).bool()
+        terminal = torch.as_tensor(np.asarray(batch["terminal"]), device=self.device).float()
+        with torch.no_grad():
+            mu, logvar = self.vae.encode(obs.flatten(0, 1))
+            z = ConvVAE.sample(mu, logvar, self.generator).reshape(b, t_len, -1)  # [B, T, Z]
+        self._remember_starts(mu.reshape(b, t_len, -1), logvar.reshape(b, t_len, -1), first)
+        action = action_to_model(torch.as_tensor(np.asarray(batch["action"]), device=self.device), self.spec)  # [B, T, A]
+        log_pi, m, log_s, done_logit, _ = self.rnn(z[:, :-1], action[:, :-1])  # predicts step t+1 from t
+        # a pair (t, t+1) counts when both are real steps of one episode (windows hold one episode)
+        valid = mask[:, 1:] * mask[:, :-1] * (~first[:, 1:]).float()  # [B, T-1]
+        denom = valid.sum().clamp(min=1.0)
+        nll = -(mdn_log_prob(log_pi, m, log_s, z[:, 1:]).mean(-1) * valid).sum() / denom  # per dim, as the authors' code
+        done = torch.nn.functional.binary_cross_entropy_with_logits(done_logit, terminal[:, 1:], reduction="none")
+        done_loss = (done * valid).sum() / denom
+        loss = nll + self.cfg.done_weight * done_loss
+        if not torch.isfinite(loss.detach()):
+            raise NonFiniteLoss(f"MDN-RNN loss is {float(loss.detach())}")
+        grad = self.rnn_opt(loss)
+        return {"loss": float(loss.detach()), "rnn_nll": float(nll.detach()), "rnn_done_loss": float(done_loss.detach()),
+                "rnn_grad_norm": grad}
+
+    def _remember_starts(self, mu: torch.Tensor, logvar: torch.Tensor, first: torch.Tensor) -> None:
+        """Keep the encodings of episodes' first frames (dreams start from them); the first
+        steps of the windows stand in until any true first frame was seen."""
+        pick = first if bool(first.any()) or len(self.bank_mu) else torch.zeros_like(first).index_fill_(1, torch.tensor([0]), True)
+        new_mu, new_lv = mu[pick].cpu().numpy(), logvar[pick].cpu().numpy()
+        self.bank_mu = np.concatenate([self.bank_mu, new_mu])[-self.cfg.z_bank:]
+        self.bank_logvar = np.concatenate([self.bank_logvar, new_lv])[-self.cfg.z_bank:]
+
+    # -- stage 3: C --------------------------------------------------------------------------
+    def model_payload(self) -> dict[str, np.ndarray]:
+        """What an evaluation actor needs: M and the dream starts (dream), or V and M (real)."""
+        out = {**to_numpy(self.rnn, "rnn"), "bank_mu": self.bank_mu, "bank_logvar": self.bank_logvar}
+        if self.cfg.train_in == "real":
+            out.update(to_numpy(self.vae, "vae"))
+        return out
+
+    def generation(self) -> dict[str, float]:
+        if self.cfg.train_in == "dream" and len(self.bank_mu) == 0:
+            raise RuntimeError("the dream has no start latents: M never saw a batch (algo.rnn_updates)")
+        t0 = time.monotonic()
+        rng = np.random.default_rng([self.seed, self.cma.generation])
+        seeds = rng.integers(0, 2**31 - 1, size=self.cfg.rollouts)  # [R] common to every candidate
+        pool = self._pool()
+        fitness = self.cma.step(lambda x: pool.evaluate(x, seeds, self.model_id, self.model_payload, self.cfg.train_in))
+        return {"cma_generation": float(self.cma.generation), "cma_best_fitness": self.cma.best_f,
+                "cma_gen_best": float(fitness.max()), "cma_gen_mean": float(fitness.mean()),
+                "cma_sigma": self.cma.sigma, "pool_retries": float(pool.retries),
+                "generation_seconds": time.monotonic() - t0}
+
+    # -- Learner API -------------------------------------------------------------------------
+    def update(self, batch: Batch) -> UpdateResult:
+        stage = self.stage
+        if stage == STAGE_VAE:
+            metrics = self.vae_step(batch)
+        elif stage == STAGE_RNN:
+            metrics = self.rnn_step(batch)
+        elif stage == STAGE_CMA:
+            metrics = self.generation()
+        else:
+            metrics = {"cma_best_fitness": self.cma.best_f}
+        self.updates += 1
+        metrics["stage"] = float(stage)
+        return UpdateResult(metrics=metrics)
+
+    def get_weights(self) -> Weights:
+        has = self.cma.generation > 0
+        return {**to_numpy(self.vae, "vae"), **to_numpy(self.rnn, "rnn"),
+                "controller": self.cma.best_x.astype(np.float32), "has_controller": np.array(float(has), np.float32)}
+
+    def state_dict(self) -> dict[str, Any]:
+        return {"vae": self.vae.state_dict(), "rnn": self.rnn.state_dict(), "vae_opt": self.vae_opt.state_dict(),
+                "rnn_opt": self.rnn_opt.state_dict(), "generator": self.generator.get_state(), "updates": self.updates,
+                "cma": self.cma.state(), "bank_mu": self.bank_mu, "bank_logvar": self.bank_logvar}
+
+    def load_state_dict(self, state: Mapping[str, Any]) -> None:
+        self.vae.load_state_dict(state["vae"])
+        self.rnn.load_state_dict(state["rnn"])
+        self.vae_opt.load_state_dict(state["vae_opt"])
+        self.rnn_opt.load_state_dict(state["rnn_opt"])
+        self.generator.set_state(torch.as_tensor(state["generator"]))
+        self.updates = int(state["updates"])
+        self.cma.load({k: np.asarray(v) for k, v in state["cma"].items()})
+        self.bank_mu = np.asarray(state["bank_mu"], np.float32)
+        self.bank_logvar = np.asarray(state["bank_logvar"], np.float32)

@@ -1,0 +1,76 @@
+"""Scoring controllers: whole batches of candidates in M's dream, or one by one in the real env.
+
+Dream (World Models, sec. 4.4, the Doom experiment): from an initial latent z_0 (a real first
+frame's encoding), C acts on [z_t, h_t], M samples z_{t+1} from its mixture at temperature tau
+and a done flag from its done head; the fitness is the number of steps survived (Take Cover's
+reward, +1 per step), so the dream serves survival tasks. A candidate's score is the mean over
+its R rollouts; every candidate of a generation sees the same R seeds (common random numbers).
+"""
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import torch
+
+from wmdist.algos.worldmodels.controller import act_batched
+from wmdist.algos.worldmodels.mdn import MDNRNN, mdn_sample
+from wmdist.algos.worldmodels.vae import ConvVAE
+from wmdist.envs.spec import EnvSpec
+from wmdist.nets.actions import action_to_env, action_to_model
+
+
+@torch.no_grad()
+def dream_fitness(
+    params: torch.Tensor,  # [N, P] candidates
+    z0: torch.Tensor,  # [N, R, Z] initial latents, one per rollout
+    rnn: MDNRNN,
+    spec: EnvSpec,
+    tau: float,
+    max_steps: int,
+    generator: torch.Generator | None = None,
+) -> np.ndarray:
+    """Mean steps survived [N] over the R dream rollouts of each candidate."""
+    n, r, z_dim = z0.shape
+    z = z0
+    state = rnn.initial(n * r, z0.device)
+    alive = torch.ones(n, r, dtype=torch.bool, device=z0.device)
+    steps = torch.zeros(n, r, device=z0.device)
+    for _ in range(max_steps):
+        h = state[0][0].reshape(n, r, -1)  # [N, R, H]
+        a = act_batched(params, z, h, spec)  # [N, R] or [N, R, A] model-space
+        a_in = action_to_model(a, spec) if spec.discrete else a  # one-hot, or already in [-1, 1]
+        log_pi, mu, log_sigma, done_logit, state = rnn.step(z.reshape(n * r, z_dim), a_in.reshape(n * r, -1), state)
+        z = mdn_sample(log_pi, mu, log_sigma, tau, generator).reshape(n, r, z_dim)
+        steps += alive.float()
+        done = torch.bernoulli(torch.sigmoid(done_logit), generator=generator).bool().reshape(n, r)
+        alive &= ~done
+        if not alive.any():
+            break
+    return steps.mean(1).cpu().numpy().astype(np.float64)
+
+
+@torch.no_grad()
+def real_return(
+    params: torch.Tensor,  # [P] one candidate
+    env: Any,  # a wmdist Env
+    vae: ConvVAE,
+    rnn: MDNRNN,
+    spec: EnvSpec,
+    seed: int,
+    max_steps: int | None = None,
+) -> tuple[float, int]:
+    """(episode return, steps) of one real episode: z_t = V's mean of o_t, h_t from M."""
+    obs = env.reset(seed)
+    state = rnn.initial(1)
+    total, steps = 0.0, 0
+    while True:
+        mu, _ = vae.encode(torch.as_tensor(obs)[None])  # [1, Z]
+        a = act_batched(params[None], mu[None], state[0][0][None], spec)[0]  # [1] or [1, A]
+        env_a = action_to_env(a, spec)[0]
+        obs, reward, term, trunc = env.step(env_a)
+        total, steps = total + reward, steps + 1
+        a_in = action_to_model(torch.as_tensor(np.asarray(env_a))[None], spec)  # [1, A]
+        _, _, _, _, state = rnn.step(mu, a_in, state)
+        if term or trunc or (max_steps and steps >= max_steps):
+            return total, steps
