@@ -87,3 +87,22 @@ def test_learner_uses_reanalyzed_value_targets_where_set():
     assert learner.update(batch).metrics["value_target"] == pytest.approx(7.0)  # z at k = 0 is the stored one
     batch["value_target_set"][:] = False
     assert learner.update(batch).metrics["value_target"] != pytest.approx(7.0)  # n-step targets otherwise
+
+
+def test_training_unroll_resets_the_lstm_every_horizon_steps():
+    """In the unroll the LSTM state is zero exactly before steps k with (k-1) % horizon == 0,
+    as in the search (the parent s^{k-1} at a depth that is a multiple of the horizon)."""
+    from wmdist.search.api import SearchConfig
+
+    algo = small_algo(search=SearchConfig(num_simulations=2, lstm_horizon=2), unroll_steps=5)
+    learner = algo.make_learner()
+    net = learner.net
+    zero_at, real = [], net.recurrent_inference_prefix
+
+    def spy(s, a, state):
+        zero_at.append(not state[0].any() and not state[1].any())
+        return real(s, a, state)
+
+    net.recurrent_inference_prefix = spy
+    learner.update(random_batch(np.random.default_rng(4), 8, 12, 3))
+    assert zero_at == [True, False, True, False, True]  # k = 1..5
