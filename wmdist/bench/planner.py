@@ -36,7 +36,7 @@ def preset_planner() -> CEMConfig:
     return load_config(str(PRESET)).algo.planner
 
 
-def time_planner(planner: CEMConfig, envs: int, min_seconds: float, seed: int = 0) -> dict[str, float]:
+def time_planner(planner: CEMConfig, envs: int, min_seconds: float, min_calls: int = 2, seed: int = 0) -> dict[str, float]:
     """Plan repeatedly for `envs` rows from random states; wall time per call and its model share."""
     algo = PlaNet(SPEC, PlaNetConfig(planner=planner), seed)
     wm = algo.make_policy().wm
@@ -57,7 +57,7 @@ def time_planner(planner: CEMConfig, envs: int, min_seconds: float, seed: int = 
     cem_plan(timed, low, high, planner, gen)  # warm-up
     in_model[0], calls = 0.0, 0
     start, cpu_start = time.perf_counter(), time.thread_time()
-    while calls < 2 or time.perf_counter() - start < min_seconds:
+    while calls < min_calls or time.perf_counter() - start < min_seconds:
         cem_plan(timed, low, high, planner, gen)
         calls += 1
     wall, cpu = time.perf_counter() - start, time.thread_time() - cpu_start
@@ -72,7 +72,7 @@ def run(quick: bool = False) -> Iterator[dict]:
         paper = CEMConfig(horizon=12, candidates=1000, top_k=100, iterations=10)
         for name, planner in (("paper", paper), ("preset", preset_planner())):
             for envs in (1, 8):
-                r = time_planner(planner, envs, 0.5 if quick else 5.0)
+                r = time_planner(planner, envs, 0.5 if quick else 5.0, 1 if quick else 2)
                 yield {
                     "case": f"{name}_E{envs}", "horizon": planner.horizon, "candidates": planner.candidates,
                     "top_k": planner.top_k, "iterations": planner.iterations, "envs": envs,

@@ -109,3 +109,12 @@ def test_dream_on_a_planet_run_writes_the_video(tmp_path, capsys):
     assert main(["dream", str(run_dir), "--horizon", "5"]) == 0
     assert "dream video" in capsys.readouterr().out
     assert (run_dir / "dream.gif").stat().st_size > 0
+
+
+def test_planner_bench_reports_decisions_and_the_model_share():
+    from wmdist.bench.planner import preset_planner, time_planner
+
+    assert preset_planner().candidates == 100  # the state preset's planner is what the bench reads
+    r = time_planner(CEMConfig(horizon=3, candidates=16, top_k=4, iterations=2), envs=2, min_seconds=0.05)
+    assert r["decisions_per_s"] > 0 and r["decisions_per_cpu_s"] > 0
+    assert 0.3 < r["model_share"] <= 1.0  # the rollouts dominate even for a tiny planner
