@@ -1,0 +1,81 @@
+"""CMA-ES with the evaluation pool: it finds a shifted sphere's optimum, a killed evaluation
+actor costs no candidate, and the search state survives a save as arrays."""
+import numpy as np
+import pytest
+import torch
+
+from wmdist.algos.worldmodels.cmaes import CMAES
+from wmdist.algos.worldmodels.pool import EvalPool, PoolFailed
+from wmdist.runtime.calls import LocalHandle
+
+from tests.algos.worldmodels.sphere_worker import SHIFT, SphereWorker
+
+MODEL = {"scale": np.array(1.0)}
+
+
+def _search(pool: EvalPool, generations: int, seed: int = 0, checks=None) -> CMAES:
+    es = CMAES(dim=5, popsize=8, sigma0=1.0, seed=seed)
+    for _ in range(generations):
+        x = es.ask()
+        f = pool.evaluate(x, np.arange(2), model_id=7, model=lambda: MODEL)
+        assert not np.isnan(f).any()  # every candidate scored
+        np.testing.assert_allclose(f, -np.sum((x - SHIFT) ** 2, 1), rtol=1e-4, atol=1e-6)  # as itself (sent as float32)
+        es.tell(x, f)
+    return es
+
+
+def test_finds_the_shifted_sphere_with_local_actors():
+    pool = EvalPool([LocalHandle(SphereWorker(i)) for i in range(3)])
+    es = _search(pool, 120)
+    assert np.abs(es.best_x - SHIFT).max() < 1e-3 and es.best_f > -1e-6
+    # each actor got the model in the first generation (once per share it already had queued), never again
+    assert 3 <= pool.model_loads <= 4 and pool.retries == 0
+
+
+def test_state_as_arrays_rebuilds_the_search():
+    pool = EvalPool([LocalHandle(SphereWorker(0))])
+    es = _search(pool, 10)
+    state = {k: torch.from_numpy(np.atleast_1d(v)) for k, v in es.state().items()}  # as a checkpoint holds it
+    again = CMAES(dim=5, popsize=8, sigma0=1.0, seed=0)
+    again.load(state)
+    assert again.generation == 10 and again.sigma == pytest.approx(es.sigma)
+    np.testing.assert_allclose(again.mean, es.mean)
+    np.testing.assert_allclose(again.es.sm.C, es.es.sm.C)
+    for _ in range(110):
+        x = again.ask()
+        again.tell(x, -np.sum((x - SHIFT) ** 2, 1))
+    assert np.abs(again.best_x - SHIFT).max() < 1e-3
+    with pytest.raises(ValueError, match="population 8"):
+        CMAES(dim=5, popsize=6, sigma0=1.0).load(state)
+
+
+def test_population_below_the_cma_minimum_is_refused():
+    with pytest.raises(ValueError, match="population must be >= 2"):
+        CMAES(dim=5, popsize=1, sigma0=1.0)
+
+
+def test_a_share_that_keeps_failing_ends_in_one_line():
+    class Broken(SphereWorker):
+        def evaluate(self, *args):
+            raise RuntimeError("boom")
+
+    pool = EvalPool([LocalHandle(Broken(0))], max_retries=2)
+    with pytest.raises(PoolFailed, match="failed 3 times; last: boom"):
+        pool.evaluate(np.zeros((4, 5)), np.arange(1), model_id=1, model=lambda: MODEL)
+
+
+def test_a_killed_actor_costs_no_candidate_on_ray(ray_session, tmp_path):
+    ray = ray_session
+    marker = tmp_path / "died"
+    cls = ray.remote(SphereWorker).options(num_cpus=0.1, max_restarts=-1, max_task_retries=0)
+    actors = [cls.remote(0, str(marker)), cls.remote(1)]
+    pids = ray.get([a.pid.remote() for a in actors])
+    pool = EvalPool(actors, max_retries=4)
+    es = _search(pool, 120)
+    assert marker.exists(), "actor 0 never died: the test did not test anything"
+    assert pool.retries >= 1
+    assert np.abs(es.best_x - SHIFT).max() < 1e-3
+    assert ray.get(actors[0].pid.remote()) != pids[0]  # Ray restarted it, and it was sent the model again
+    assert pool.model_loads >= 3
+    for a in actors:
+        ray.kill(a)
