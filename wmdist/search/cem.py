@@ -38,7 +38,7 @@ class CEMConfig:
     def validate(self) -> None:
         """One-line ValueError for combinations the ranges alone can't catch."""
         if self.top_k > self.candidates:
-            raise ValueError(f"planner top_k ({self.top_k}) must not exceed planner candidates ({self.candidates})")
+            raise ValueError(f"planner.top_k ({self.top_k}) must not exceed planner.candidates ({self.candidates})")
 
 
 @dataclass

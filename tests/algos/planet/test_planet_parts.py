@@ -22,7 +22,7 @@ TINY = dict(deter=16, stoch=4, units=16, mlp_layers=1, planner=CEMConfig(horizon
 
 
 @pytest.mark.parametrize("override, words", [
-    ("algo.planner.top_k=2000", "top_k (2000) must not exceed planner candidates (100)"),
+    ("algo.planner.top_k=2000", "algo.planner.top_k (2000) must not exceed algo.planner.candidates (100)"),
     ("algo.planner.horizon=0", "algo.planner.horizon"),
     ("algo.overshooting_distance=1", "overshooting_distance"),
 ])

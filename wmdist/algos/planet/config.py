@@ -40,7 +40,7 @@ class PlaNetConfig:
         try:
             self.planner.validate()
         except ValueError as err:
-            raise ValueError(f"algo.{err}") from None
+            raise ValueError(str(err).replace("planner.", "algo.planner.")) from None  # name the full keys
         if self.overshooting_distance == 1:
             raise ValueError("algo.overshooting_distance must be 0 (off) or at least 2 (1 is the one-step KL)")
 
