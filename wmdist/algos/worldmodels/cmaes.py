@@ -27,7 +27,9 @@ class CMAES:
     def _fresh(self, x0: np.ndarray, sigma: float):
         import cma
 
+        # CSA step-size control always (cma picks TPA for some sizes): its one path `ps` is the state saved
         opts = {"popsize": self.popsize, "seed": self.seed + 1, "verbose": -9, "CMA_diagonal": False,
+                "AdaptSigma": cma.sigma_adaptation.CMAAdaptSigmaCSA,
                 "tolfun": 0, "tolx": 0, "tolfunhist": 0, "tolstagnation": int(1e9), "tolflatfitness": int(1e9)}
         return cma.CMAEvolutionStrategy(x0, sigma, opts)
 
@@ -62,7 +64,7 @@ class CMAES:
     # -- state as arrays ---------------------------------------------------------------------
     def state(self) -> dict[str, np.ndarray]:
         es = self.es
-        ps = es.adapt_sigma.ps if getattr(es.adapt_sigma, "ps", None) is not None else np.zeros(self.dim)
+        ps = es.adapt_sigma.ps if getattr(es.adapt_sigma, "ps", None) is not None else np.zeros(self.dim)  # None before a tell
         return {
             "mean": self.mean, "sigma": np.array(self.sigma), "C": np.asarray(es.sm.C, np.float64),
             "pc": np.asarray(es.pc, np.float64), "ps": np.asarray(ps, np.float64),
