@@ -66,6 +66,12 @@ BUDGET.update({"dreamerv3_minatar_breakout.yaml": [*DREAMER, "actors.warmup_rand
                "muzero_minatar_asterix.yaml": MINATAR_SMOKE,
                "dreamerv3_minatar_asterix.yaml": [*MINATAR_SMOKE, "replay.seq_len=16", "actors.warmup_random_steps=200"]})
 SMOKE |= {"muzero_minatar_asterix.yaml", "dreamerv3_minatar_asterix.yaml"}
+# World Models: two updates of V, two of M, then CMA-ES generations scored by the evaluation pool (a smoke run)
+WORLDMODELS = ["run.max_updates=6", "replay.min_size=60", "learner.batch_size=2", "replay.seq_len=8", "replay.overlap=2",
+               "actors.envs_per_actor=2", "algo.vae_updates=2", "algo.rnn_updates=2", "algo.popsize=4", "algo.rollouts=1",
+               "algo.vae_frames=8", "algo.dream_max_steps=50", "algo.real_max_steps=20"]
+BUDGET.update({"worldmodels_carracing.yaml": WORLDMODELS, "worldmodels_doom_takecover.yaml": WORLDMODELS})
+SMOKE |= {"worldmodels_carracing.yaml", "worldmodels_doom_takecover.yaml"}
 SCORE_BATCHES = 6  # fixed batches each state is scored on
 
 
