@@ -32,6 +32,16 @@ def test_bad_planner_config_is_one_config_error_line(override, words):
     assert words in str(err.value) and "\n" not in str(err.value)
 
 
+@pytest.mark.parametrize("preset", ["planet_dmc_cartpole_swingup.yaml", "planet_dmc_cartpole_swingup_pixels.yaml"])
+def test_presets_use_the_papers_action_repeat_and_planner_horizon(preset):
+    from wmdist.algos.planet.config import ACTION_REPEAT
+
+    cfg = load_config(str(CONFIGS / preset))
+    domain = cfg.env.id.split(":")[1].split("-")[0]
+    assert cfg.env.action_repeat == ACTION_REPEAT[domain] == 8
+    assert cfg.algo.planner.horizon == 12 and cfg.algo.expl_noise == 0.3 and (cfg.algo.deter, cfg.algo.stoch) == (200, 30)
+
+
 def test_continuous_planner_on_a_discrete_env_is_one_config_error_line():
     from wmdist.runtime.preflight import check_env_and_algo
 

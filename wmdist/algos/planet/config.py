@@ -7,6 +7,10 @@ from wmdist.config.fields import param, section
 from wmdist.nets.world_model import WorldModelSettings
 from wmdist.search.cem import CEMConfig
 
+# PlaNet's action repeat per dm_control domain (docs/reference.md); a preset sets `env.action_repeat`
+# from it (the algorithm sees the env's spec, not its config).
+ACTION_REPEAT: dict[str, int] = {"cartpole": 8, "cheetah": 4, "walker": 2, "finger": 2}
+
 
 @dataclass
 class PlaNetConfig:
