@@ -88,3 +88,25 @@ def test_collector_windows_replay_in_cartpole(monkeypatch):
             np.testing.assert_array_equal(d["obs"][j, :OVERLAP], d["obs"][i, T - OVERLAP:])
             shared += 1
     assert shared > 0
+
+
+def test_random_warm_up_counts_env_steps_and_tells_the_policy(tmp_path):
+    """`actors.warmup_random_steps` is env steps (E per batched call), and the policy is told the
+    random actions taken in its place (a recurrent policy conditions on them)."""
+    from wmdist.runtime.local import LocalSession
+
+    cfg = load_config(str(Path(__file__).parent / "fake.yaml"),
+                      [f"run.dir={tmp_path}", "ray.local=true", "actors.num=1", "actors.envs_per_actor=4",
+                       "actors.segment_steps=1", "actors.warmup_random_steps=10", "replay.shards=1"])
+    session = LocalSession(cfg, tmp_path)
+    try:
+        col = session.collectors[0]
+        told = []
+        col.policy.taken = lambda actions: told.append(np.asarray(actions).copy())
+        session.collect(2)
+        assert col.random_steps_left == 2 and len(told) == 2
+        session.collect(2)
+        assert col.random_steps_left <= 0 and len(told) == 3  # the third call covers the last 2 steps
+        assert all(t.shape == (4,) for t in told)
+    finally:
+        session.close()

@@ -5,11 +5,13 @@ from types import SimpleNamespace
 
 from wmdist.runtime.driver import Counters, Driver
 from wmdist.runtime.roles.setup import process_tag
+from wmdist.runtime.table import BUILTIN
 
 
 def _driver(max_restarts: int = -1) -> Driver:
     cfg = SimpleNamespace(actors=SimpleNamespace(max_restarts=max_restarts))
-    return Driver(SimpleNamespace(cfg=cfg), Counters())  # only cfg is read outside run()
+    # only cfg and the table of roles are read outside run()
+    return Driver(SimpleNamespace(cfg=cfg, roles=BUILTIN, local=False), Counters())
 
 
 def test_new_process_counts_one_restart_and_same_process_none():

@@ -97,6 +97,10 @@ class Policy(ABC):
     def set_progress(self, env_steps: int, updates: int) -> None:
         """Told the run's progress (for temperature or exploration schedules)."""
 
+    def taken(self, actions: np.ndarray) -> None:
+        """Told the actions [E, ...] actually taken when they differ from the ones `act` returned
+        (the collector's random warm-up): a recurrent policy conditions its next step on them."""
+
 
 class Learner(ABC):
     """Owns the trainable parameters and optimizers (in the learner actor)."""

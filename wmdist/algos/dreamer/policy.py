@@ -10,6 +10,7 @@ from wmdist.algos.dreamer.config import DreamerConfig
 from wmdist.nets.latent_layers import Latent
 from wmdist.algos.dreamer.learner import load_policy_weights
 from wmdist.algos.dreamer.nets import ActorCritic, WorldModel, action_to_env
+from wmdist.nets.actions import action_to_model
 from wmdist.envs.spec import EnvSpec
 
 
@@ -68,3 +69,7 @@ class DreamerPolicy(Policy):
             a_model = action
         self.h, self.z, self.prev_action = h, z, a_model
         return action_to_env(action, self.spec), {}
+
+    def taken(self, actions: np.ndarray) -> None:
+        """The warm-up's random actions replace the ones returned: the filter's next step sees them."""
+        self.prev_action = action_to_model(torch.as_tensor(np.asarray(actions), device=self.device), self.spec)

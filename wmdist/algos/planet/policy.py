@@ -17,7 +17,7 @@ from wmdist.algos.base import Policy, Weights
 from wmdist.algos.planet.config import PlaNetConfig
 from wmdist.algos.planet.planning import reward_sum_fn
 from wmdist.envs.spec import EnvSpec
-from wmdist.nets.actions import action_to_env
+from wmdist.nets.actions import action_to_env, action_to_model
 from wmdist.nets.latent_layers import Latent
 from wmdist.nets.world_model import WorldModel, load_world_model
 from wmdist.search.cem import cem_plan, shift_plan
@@ -73,3 +73,7 @@ class PlaNetPolicy(Policy):
             action = (action + self.cfg.expl_noise * noise).clamp(-1, 1)
         self.h, self.z, self.prev_action, self.plan = h, z, action, result.mean
         return action_to_env(action, self.spec), {}
+
+    def taken(self, actions: np.ndarray) -> None:
+        """The warm-up's random actions replace the ones returned: the filter's next step sees them."""
+        self.prev_action = action_to_model(torch.as_tensor(np.asarray(actions), device=self.device), self.spec)

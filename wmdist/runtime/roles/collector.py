@@ -72,7 +72,8 @@ class Collector:
         actions, extras = self.policy.act(s.obs, s.first, s.legal, s.to_play, explore)
         if self.random_steps_left > 0:
             actions = self._random_actions(s.legal)
-            self.random_steps_left -= 1
+            self.policy.taken(actions)  # a recurrent policy's next step conditions on these
+            self.random_steps_left -= len(actions)  # env steps: one per env of this batched call
         return np.asarray(actions), extras
 
     def _flush(self, timeout: float) -> bool:
