@@ -11,6 +11,7 @@ ALGORITHMS: dict[str, str] = {
     "planet": "wmdist.algos.planet:PlaNet",
     "efficientzero": "wmdist.algos.efficientzero:EfficientZero",
     "worldmodels": "wmdist.algos.worldmodels:WorldModels",
+    "jepa": "wmdist.algos.jepa:Jepa",
 }
 
 

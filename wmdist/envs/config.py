@@ -15,9 +15,9 @@ class EnvConfig:
     Fields that do not apply to the chosen family are ignored (e.g. Atari options for dmc).
     """
 
-    id: str = param("gym:CartPole-v1", "env id: gym:<id>, dmc:<domain>-<task>, atari:<Game>, minatar:<Game>, board:<game>, carracing:CarRacing-v3, vizdoom:TakeCover")
+    id: str = param("gym:CartPole-v1", "env id: gym:<id>, dmc:<domain>-<task>, atari:<Game>, minatar:<Game>, board:<game>, carracing:CarRacing-v3, vizdoom:TakeCover, nav:tworooms|open")
     pixels: bool = param(False, "dmc: observe image_size x image_size RGB pixels instead of state")
-    image_size: int = param(64, "dmc, carracing, vizdoom: side of the square pixel observation", ge=8, le=1024)
+    image_size: int = param(64, "dmc, carracing, vizdoom, nav: side of the square pixel observation", ge=8, le=1024)
     camera: int = param(-1, "dmc: camera id for pixels and render; -1 = domain default", ge=-1)
     action_repeat: int = param(1, "gym/dmc: repeat each action this many times, summing rewards", ge=1)
     time_limit: int | None = param(0, "episode cap in agent steps (after repeat); 0/None = family default", ge=0)

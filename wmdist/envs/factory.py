@@ -7,6 +7,7 @@
     board:<game>             board:tictactoe, board:connect4 (two players)
     carracing:CarRacing-v3   gymnasium's car racing from 64x64 pixels (World Models)
     vizdoom:<Scenario>       vizdoom:TakeCover from 64x64 pixels (World Models)
+    nav:<layout>             nav:tworooms, nav:open: point-mass goal reaching from pixels (frame + goal image)
 """
 from __future__ import annotations
 
@@ -28,6 +29,7 @@ _FAMILIES: dict[str, str] = {
     "board": "two-player board games: board:tictactoe, board:connect4",
     "carracing": "gymnasium's Box2D car racing from image_size pixels: carracing:CarRacing-v3",
     "vizdoom": "ViZDoom scenario from image_size pixels: vizdoom:TakeCover",
+    "nav": "point-mass goal reaching from pixels, observation = frame + goal image (6 channels): nav:tworooms, nav:open",
 }
 
 
@@ -62,6 +64,10 @@ def _names(family: str) -> list[str]:
         from wmdist.envs.vizdoom_env import vizdoom_names
 
         return vizdoom_names()
+    if family == "nav":
+        from wmdist.envs.nav import nav_layouts
+
+        return nav_layouts()
     from wmdist.envs.boardgames.game import GAMES
 
     return list(GAMES)
@@ -74,7 +80,7 @@ def _unknown(env_id: str, candidates: list[str]) -> ValueError:
     return ValueError(
         f"unknown env id '{env_id}' ({hint}); families: gym:<gymnasium id>, "
         "dmc:<domain>-<task>, atari:<Game>, minatar:<Game>, board:tictactoe|connect4, "
-        "carracing:CarRacing-v3, vizdoom:TakeCover"
+        "carracing:CarRacing-v3, vizdoom:TakeCover, nav:tworooms|open"
     )
 
 
@@ -152,6 +158,10 @@ def make_env(cfg: EnvConfig, seed: int) -> Env:
         from wmdist.envs.vizdoom_env import VizDoomEnv
 
         return VizDoomEnv(cfg, seed, name)
+    if family == "nav":
+        from wmdist.envs.nav import NavEnv
+
+        return NavEnv(cfg, seed, name)
     if cfg.action_repeat != 1:
         raise ValueError(f"env.action_repeat must be 1 for board games, got {cfg.action_repeat}")
     from wmdist.envs.boardgames.env import BoardEnv

@@ -1,0 +1,43 @@
+"""JEPA configuration (LeWorldModel's numbers where they fit a CPU, docs/reference.md)."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from wmdist.config.fields import param, section
+from wmdist.search.cem import CEMConfig
+
+
+@dataclass
+class JepaConfig:
+    """The `algo` section for JEPA: encoder, projector, predictor, SIGReg and a goal-reaching CEM planner."""
+
+    # --- encoder and projector --------------------------------------------------------
+    cnn_depth: int = param(16, "channels of the first of four stride-2 convs on a 64x64 frame (LeWM: a ViT-tiny)", ge=1)
+    embed_dim: int = param(32, "embedding width D after the projector (LeWM: 192)", ge=1)
+    proj_hidden: int = param(256, "hidden width of the projector MLP (LeWM: a BatchNorm projector)", ge=1)
+    # --- predictor --------------------------------------------------------------------
+    history: int = param(1, "embeddings and actions the predictor sees (LeWM: 3; the point mass is Markov in one frame)",
+                         ge=1)
+    pred_hidden: int = param(256, "hidden width of the predictor MLP (LeWM: a 6-layer transformer)", ge=1)
+    pred_layers: int = param(2, "hidden layers of the predictor MLP", ge=1)
+    act: str = param("silu", "activation", choices=("elu", "silu", "relu", "tanh"))
+    # --- loss -------------------------------------------------------------------------
+    sigreg_weight: float = param(0.09, "lambda of MSE + lambda x SIGReg (LeWM: 0.09); 0 = the collapse ablation", ge=0)
+    sigreg_projections: int = param(256, "random unit directions M drawn afresh every update (LeWM: 1024)", ge=1)
+    sigreg_knots: int = param(17, "trapezoid knots K of the Epps-Pulley integral (LeWM: 17)", ge=2)
+    sigreg_t_max: float = param(3.0, "upper end of the integral over t (LeWM: 3)", gt=0)
+    # --- optimisation -----------------------------------------------------------------
+    lr: float = param(3e-4, "Adam learning rate", gt=0)
+    grad_clip: float = param(100.0, "gradient norm clip (0 = none)", ge=0)
+    # --- acting -----------------------------------------------------------------------
+    planner: CEMConfig = section(CEMConfig, "CEM planner toward the goal embedding, run at every step (MPC; "
+                                            "LeWM: J 300, K 30, I 30)")
+    explore_keep: float = param(0.8, "collectors act at random (reward-free data): probability that a step keeps "
+                                     "the previous random action, so runs go straight and cross rooms", ge=0, lt=1)
+
+    def validate(self) -> None:
+        """One-line ValueError for combinations the ranges alone can't catch."""
+        try:
+            self.planner.validate()
+        except ValueError as err:
+            raise ValueError(f"algo.{err}") from None

@@ -1,0 +1,92 @@
+"""JEPA's learner (LeWorldModel's objective, docs/reference.md):
+
+    L = MSE(pred(z_{t-h+1..t}, a_{t-h+1..t}), z_{t+1}) + lambda * SIGReg(z)
+
+with z = projector(encoder(frame)) for every real step of the batch. Both sides of the MSE
+carry gradients: there is no stop-gradient and no EMA target; SIGReg alone keeps the
+embeddings from collapsing (with `sigreg_weight: 0` they do, and the MSE goes to zero).
+"""
+from __future__ import annotations
+
+from typing import Any, Mapping
+
+import numpy as np
+import torch
+
+from wmdist.algos.base import Batch, Learner, NonFiniteLoss, UpdateResult, Weights
+from wmdist.algos.jepa.config import JepaConfig
+from wmdist.algos.jepa.model import FRAME_CHANNELS, JepaModel, model_weights
+from wmdist.algos.jepa.sigreg import effective_rank, random_directions, sigreg
+from wmdist.envs.spec import EnvSpec
+from wmdist.nets.actions import action_to_model
+from wmdist.nets.optim import GuardedStep, OptimConfig
+
+FIELDS = ("obs", "action", "mask")
+
+
+def history_windows(x: torch.Tensor, h: int) -> torch.Tensor:
+    """[B, T, F] -> [B, T - h, h, F]: for each t = h-1 .. T-2 (steps with a next step in the
+    window) the h rows ending at t, oldest first."""
+    return x.unfold(1, h, 1)[:, : x.shape[1] - h].movedim(-1, 2)
+
+
+class JepaLearner(Learner):
+    def __init__(self, cfg: JepaConfig, spec: EnvSpec, device: str = "cpu", seed: int = 0) -> None:
+        self.cfg, self.spec, self.device = cfg, spec, torch.device(device)
+        torch.manual_seed(seed)
+        self.model = JepaModel(cfg, spec.action_dim).to(self.device)
+        self.opt = GuardedStep(self.model.parameters(), OptimConfig(kind="adam", lr=cfg.lr, clip_norm=cfg.grad_clip))
+        self.generator = torch.Generator(self.device).manual_seed(seed)
+        self.updates = 0
+
+    def loss(self, batch: Batch) -> tuple[torch.Tensor, dict[str, float]]:
+        """The JEPA loss of one batch and its parts (floats) for logging."""
+        missing = [k for k in FIELDS if k not in batch]
+        if missing:
+            raise ValueError(f"JEPA batch lacks fields {missing}")
+        cfg, h = self.cfg, self.cfg.history
+        obs = torch.as_tensor(np.array(batch["obs"]), device=self.device)  # [B, T, 64, 64, 6]
+        mask = torch.as_tensor(np.array(batch["mask"]), device=self.device).float()  # [B, T]
+        b, t_len = mask.shape
+        if t_len <= h:
+            raise ValueError(f"JEPA needs sequences longer than algo.history ({h}), got {t_len} steps")
+        is_weight = torch.as_tensor(np.array(batch["is_weight"]), device=self.device).float() if "is_weight" in batch \
+            else torch.ones(b, device=self.device)
+        action = action_to_model(torch.as_tensor(np.array(batch["action"]), device=self.device), self.spec)  # [B, T, A]
+        z = self.model.encode(obs[..., :FRAME_CHANNELS])  # [B, T, D]
+        z_hist, a_hist = history_windows(z, h), history_windows(action, h)  # [B, T-h, h, D], [B, T-h, h, A]
+        pred = self.model.predict(z_hist.flatten(0, 1), a_hist.flatten(0, 1)).reshape(b, t_len - h, -1)  # [B, T-h, D]
+        target = z[:, h:]  # z_{t+1} [B, T-h, D], with gradients (no stop-gradient)
+        w = mask[:, h:] * is_weight[:, None]  # [B, T-h]: the target step is real
+        mse = ((pred - target) ** 2).mean(-1)  # [B, T-h]
+        pred_loss = (mse * w).sum() / w.sum().clamp(min=1.0)
+        real = z[mask > 0]  # [N, D] every real step's embedding
+        dirs = random_directions(cfg.embed_dim, cfg.sigreg_projections, self.generator, self.device)  # [D, M]
+        reg = sigreg(real, dirs, cfg.sigreg_knots, cfg.sigreg_t_max)
+        loss = pred_loss + cfg.sigreg_weight * reg
+        with torch.no_grad():
+            metrics = {"loss": float(loss), "pred_loss": float(pred_loss), "sigreg": float(reg),
+                       "effective_rank": effective_rank(real), "embed_std": float(real.std(0).mean())}
+        return loss, metrics
+
+    # --- Learner API ----------------------------------------------------------------
+    def update(self, batch: Batch) -> UpdateResult:
+        loss, metrics = self.loss(batch)
+        if not torch.isfinite(loss.detach()).all():
+            raise NonFiniteLoss(f"jepa loss is {float(loss.detach())}")
+        metrics["grad_norm"] = self.opt(loss)
+        self.updates += 1
+        return UpdateResult(metrics=metrics)
+
+    def get_weights(self) -> Weights:
+        return model_weights(self.model, self.updates)
+
+    def state_dict(self) -> dict[str, Any]:
+        return {"model": self.model.state_dict(), "opt": self.opt.state_dict(), "generator": self.generator.get_state(),
+                "updates": self.updates}
+
+    def load_state_dict(self, state: Mapping[str, Any]) -> None:
+        self.model.load_state_dict(state["model"])
+        self.opt.load_state_dict(state["opt"])
+        self.generator.set_state(torch.as_tensor(state["generator"]))
+        self.updates = int(state["updates"])

@@ -1,0 +1,76 @@
+"""The JEPA world model: encoder + projector (frame -> embedding) and an action-conditioned
+predictor (a short history of embeddings and actions -> the next embedding). No decoder.
+
+Observations are [..., 64, 64, 6] uint8: the current frame and the goal image, 3 channels
+each (`wmdist/envs/nav.py`); both halves go through the same encoder.
+"""
+from __future__ import annotations
+
+import numpy as np
+import torch
+from torch import nn
+
+from wmdist.algos.base import Weights
+from wmdist.algos.jepa.config import JepaConfig
+from wmdist.nets.conv import ConvEncoder
+from wmdist.nets.mlp import ACTIVATIONS, mlp
+
+FRAME_CHANNELS = 3  # one RGB frame; an observation is the current frame then the goal image
+UPDATES_KEY = "jepa.updates"  # extra entry of the published weights: learner updates behind them
+
+
+class Projector(nn.Module):
+    """Linear-BN-act-Linear-BN (LeWM: a BatchNorm projector). The batch norms put every embedding
+    dimension at unit scale from the start, however little the frames differ (a few pixels of a
+    point mass), so SIGReg shapes the distribution instead of first fighting a near-constant encoder;
+    they use running statistics in eval mode (acting)."""
+
+    def __init__(self, in_dim: int, hidden: int, out_dim: int, act: str) -> None:
+        super().__init__()
+        self.net = nn.Sequential(nn.Linear(in_dim, hidden, bias=False), nn.BatchNorm1d(hidden), ACTIVATIONS[act](),
+                                 nn.Linear(hidden, out_dim, bias=False), nn.BatchNorm1d(out_dim))
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:  # [..., F] -> [..., D]
+        return self.net(x.reshape(-1, x.shape[-1])).reshape(*x.shape[:-1], -1)
+
+
+class JepaModel(nn.Module):
+    def __init__(self, cfg: JepaConfig, action_dim: int) -> None:
+        super().__init__()
+        self.cfg, self.action_dim = cfg, action_dim
+        self.conv = ConvEncoder(FRAME_CHANNELS, cfg.cnn_depth, cfg.act, norm=True)
+        self.projector = Projector(self.conv.out_dim, cfg.proj_hidden, cfg.embed_dim, cfg.act)
+        self.predictor = mlp(cfg.history * (cfg.embed_dim + action_dim), [cfg.pred_hidden] * cfg.pred_layers,
+                             cfg.embed_dim, cfg.act, norm=True)
+
+    def encode(self, frames: torch.Tensor) -> torch.Tensor:
+        """uint8 [..., 64, 64, 3] -> embeddings [..., D]."""
+        return self.projector(self.conv(frames))
+
+    def encode_obs(self, obs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """uint8 [..., 64, 64, 6] -> (current frame's embedding [..., D], goal image's [..., D])."""
+        both = torch.stack([obs[..., :FRAME_CHANNELS], obs[..., FRAME_CHANNELS:]], 0)  # [2, ..., 64, 64, 3]
+        z = self.encode(both)
+        return z[0], z[1]
+
+    def predict(self, z_hist: torch.Tensor,  # [N, h, D] the last h embeddings, oldest first
+                a_hist: torch.Tensor,  # [N, h, A] the actions taken at them
+                ) -> torch.Tensor:
+        """The next embedding [N, D]: z_t plus the predictor's change (a residual keeps the
+        untrained predictor near the identity, so early plans stay where they are)."""
+        x = torch.cat([z_hist, a_hist], -1).flatten(1)  # [N, h * (D + A)]
+        return z_hist[:, -1] + self.predictor(x)
+
+
+def model_weights(model: JepaModel, updates: int) -> Weights:
+    """The published snapshot: the state dict as numpy, plus the update count behind it."""
+    out = {k: v.detach().cpu().numpy().copy() for k, v in model.state_dict().items()}
+    out[UPDATES_KEY] = np.asarray(updates, np.int64)
+    return out
+
+
+def load_model(model: JepaModel, weights: Weights) -> int:
+    """Load a snapshot into `model`; returns the learner updates behind it."""
+    state = {k: torch.as_tensor(np.array(v)) for k, v in weights.items() if k != UPDATES_KEY}
+    model.load_state_dict(state)
+    return int(weights.get(UPDATES_KEY, 0))

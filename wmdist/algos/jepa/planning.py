@@ -1,0 +1,46 @@
+"""JEPA's CEM objective: minus the squared distance between the last predicted embedding and
+the goal image's embedding (LeWorldModel's planning cost, docs/reference.md).
+
+Each candidate action sequence of each env is rolled forward with the predictor from that
+env's last h embeddings (and the h - 1 actions between them); the planner in
+`wmdist.search.cem` only sees the callable.
+"""
+from __future__ import annotations
+
+import torch
+
+from wmdist.algos.jepa.model import JepaModel
+from wmdist.search.cem import ScoreFn
+
+
+def rollout(model: JepaModel,
+            z_hist: torch.Tensor,  # [N, h, D] the last h embeddings, oldest first
+            a_past: torch.Tensor,  # [N, h-1, A] the actions taken at all but the newest
+            actions: torch.Tensor,  # [N, H, A] the actions to imagine
+            ) -> torch.Tensor:
+    """The predicted embeddings z_{t+1..t+H} [N, H, D]."""
+    out = []
+    for k in range(actions.shape[1]):
+        a_win = torch.cat([a_past, actions[:, k:k + 1]], 1)  # [N, h, A]
+        z_next = model.predict(z_hist, a_win)  # [N, D]
+        out.append(z_next)
+        z_hist = torch.cat([z_hist[:, 1:], z_next[:, None]], 1)
+        a_past = a_win[:, 1:]
+    return torch.stack(out, 1)
+
+
+def goal_distance_fn(model: JepaModel,
+                     z_hist: torch.Tensor,  # [E, h, D]
+                     a_past: torch.Tensor,  # [E, h-1, A]
+                     z_goal: torch.Tensor,  # [E, D] the goal image's embedding
+                     ) -> ScoreFn:
+    """A score function actions [E, J, H, A] -> -||z_{t+H} - z_goal||^2 [E, J]."""
+
+    @torch.no_grad()
+    def score(actions: torch.Tensor) -> torch.Tensor:
+        e, j, horizon, a_dim = actions.shape
+        rep = lambda x: x.repeat_interleave(j, 0)  # candidates of one env are adjacent  # noqa: E731
+        z_last = rollout(model, rep(z_hist), rep(a_past), actions.reshape(e * j, horizon, a_dim))[:, -1]  # [E*J, D]
+        return -((z_last - rep(z_goal)) ** 2).sum(-1).reshape(e, j)
+
+    return score
