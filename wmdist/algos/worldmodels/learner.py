@@ -52,7 +52,7 @@ class WorldModelsLearner(Learner):
     def use_services(self, services: Mapping[str, list]) -> None:
         handles = list(services.get(POOL_ROLE, []))
         if handles:
-            self.pool = EvalPool(handles, self.cfg.pool_max_retries)
+            self.pool = EvalPool(handles, self.cfg.pool_max_retries, self._shares())
 
     def _pool(self) -> EvalPool:
         if self.pool is None:  # eval_actors = 0 (or a learner built outside a run): dream here
@@ -60,8 +60,13 @@ class WorldModelsLearner(Learner):
             from wmdist.runtime.calls import LocalHandle
 
             self.pool = EvalPool([LocalHandle(EvalWorker(None, self.spec, 0, 0, algo_config=self.cfg))],
-                                 self.cfg.pool_max_retries)
+                                 self.cfg.pool_max_retries, self._shares())
         return self.pool
+
+    def _shares(self) -> int:
+        """Shares per actor and generation: one batched dream each, or a few real shares (episode
+        lengths vary, so smaller shares balance the actors)."""
+        return 1 if self.cfg.train_in == "dream" else 2
 
     @property
     def stage(self) -> int:
@@ -80,7 +85,7 @@ class WorldModelsLearner(Learner):
     # -- stage 1: V --------------------------------------------------------------------------
     def _frames(self, batch: Batch) -> torch.Tensor:
         mask = np.asarray(batch["mask"], bool)  # [B, T]
-        frames = np.asarray(batch["obs"])[mask]  # [N, 64, 64, C] real steps only
+        frames = np.asarray(batch["obs"])[mask]  # [N, 64, 64, C] real steps only (a copy, writable)
         if self.cfg.vae_frames and len(frames) > self.cfg.vae_frames:
             idx = torch.randperm(len(frames), generator=self.generator)[: self.cfg.vae_frames].numpy()
             frames = frames[np.sort(idx)]
@@ -100,16 +105,16 @@ class WorldModelsLearner(Learner):
 
     # -- stage 2: M --------------------------------------------------------------------------
     def rnn_step(self, batch: Batch) -> dict[str, float]:
-        obs = torch.as_tensor(np.asarray(batch["obs"]), device=self.device)  # [B, T, 64, 64, C]
+        obs = torch.as_tensor(np.array(batch["obs"]), device=self.device)  # [B, T, 64, 64, C] (copy: replay arrays may be read-only)
         b, t_len = obs.shape[:2]
-        mask = torch.as_tensor(np.asarray(batch["mask"]), device=self.device).float()  # [B, T]
-        first = torch.as_tensor(np.asarray(batch["first"]), device=self.device).bool()
-        terminal = torch.as_tensor(np.asarray(batch["terminal"]), device=self.device).float()
+        mask = torch.as_tensor(np.array(batch["mask"]), device=self.device).float()  # [B, T]
+        first = torch.as_tensor(np.array(batch["first"]), device=self.device).bool()
+        terminal = torch.as_tensor(np.array(batch["terminal"]), device=self.device).float()
         with torch.no_grad():
             mu, logvar = self.vae.encode(obs.flatten(0, 1))
             z = ConvVAE.sample(mu, logvar, self.generator).reshape(b, t_len, -1)  # [B, T, Z]
         self._remember_starts(mu.reshape(b, t_len, -1), logvar.reshape(b, t_len, -1), first)
-        action = action_to_model(torch.as_tensor(np.asarray(batch["action"]), device=self.device), self.spec)  # [B, T, A]
+        action = action_to_model(torch.as_tensor(np.array(batch["action"]), device=self.device), self.spec)  # [B, T, A]
         log_pi, m, log_s, done_logit, _ = self.rnn(z[:, :-1], action[:, :-1])  # predicts step t+1 from t
         # a pair (t, t+1) counts when both are real steps of one episode (windows hold one episode)
         valid = mask[:, 1:] * mask[:, :-1] * (~first[:, 1:]).float()  # [B, T-1]

@@ -43,7 +43,7 @@ class WorldModelsPolicy(Policy):
             self.state = self.rnn.initial(e, self.device)
         keep = torch.as_tensor(~np.asarray(first, bool), device=self.device).float()[None, :, None]  # [1, E, 1]
         self.state = (self.state[0] * keep, self.state[1] * keep)  # a new episode starts from zero state
-        mu, _ = self.vae.encode(torch.as_tensor(obs, device=self.device))  # [E, Z]
+        mu, _ = self.vae.encode(torch.as_tensor(np.array(obs), device=self.device))  # [E, Z] (a copy: obs may be read-only)
         a = act_batched(self.controller[None], mu[None], self.state[0][0][None], self.spec)[0]  # [E] or [E, A]
         if explore and self.cfg.collect_noise > 0:
             if self.spec.discrete:
