@@ -9,6 +9,7 @@ at 160x120 RGB and resized to image_size x image_size (the paper: 64x64). Action
 from __future__ import annotations
 
 import os
+import tempfile
 from typing import Any
 
 import numpy as np
@@ -39,6 +40,8 @@ class VizDoomEnv(Env):
         game.set_screen_resolution(vizdoom.ScreenResolution.RES_160X120)
         game.set_screen_format(vizdoom.ScreenFormat.RGB24)
         game.set_seed(int(seed))
+        # the engine writes its settings file; by default into the working directory
+        game.set_doom_config_path(os.path.join(tempfile.gettempdir(), f"wmdist-vizdoom-{os.getuid()}.ini"))
         game.init()
         self._game, self._side, self._repeat = game, cfg.image_size, cfg.action_repeat
         self._max_steps = cfg.max_steps(-(-cap // self._repeat))
