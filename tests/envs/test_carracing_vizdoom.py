@@ -29,7 +29,7 @@ def test_carracing_64x64_continuous():
             obs, r, term, trunc = env.step(np.array([0.0, 1.0, 0.0], np.float32))
             assert_obs_matches_spec(env, obs)
         assert trunc and not term
-        assert env.render().shape == (96, 96, 3)
+        assert env.render().shape == (400, 600, 3)  # gymnasium's full-size view, for videos
 
 
 def test_takecover_survival_reward_and_seeded_replay():

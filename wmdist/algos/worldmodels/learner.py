@@ -132,7 +132,9 @@ class WorldModelsLearner(Learner):
     def _remember_starts(self, mu: torch.Tensor, logvar: torch.Tensor, first: torch.Tensor) -> None:
         """Keep the encodings of episodes' first frames (dreams start from them); the first
         steps of the windows stand in until any true first frame was seen."""
-        pick = first if bool(first.any()) or len(self.bank_mu) else torch.zeros_like(first).index_fill_(1, torch.tensor([0]), True)
+        pick = first.clone()
+        if not bool(first.any()) and len(self.bank_mu) == 0:
+            pick[:, 0] = True
         new_mu, new_lv = mu[pick].cpu().numpy(), logvar[pick].cpu().numpy()
         self.bank_mu = np.concatenate([self.bank_mu, new_mu])[-self.cfg.z_bank:]
         self.bank_logvar = np.concatenate([self.bank_logvar, new_lv])[-self.cfg.z_bank:]
