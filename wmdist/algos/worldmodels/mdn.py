@@ -67,8 +67,9 @@ def mdn_sample(log_pi: torch.Tensor, mu: torch.Tensor, log_sigma: torch.Tensor, 
                generator: torch.Generator | None = None) -> torch.Tensor:
     """One draw per dimension from the tempered mixture: [..., Z, K] -> [..., Z]."""
     log_pi, log_sigma = tempered(log_pi, log_sigma, tau)
-    flat = log_pi.reshape(-1, log_pi.shape[-1])
-    k = torch.multinomial(flat.exp(), 1, generator=generator).reshape(*log_pi.shape[:-1], 1)  # [..., Z, 1]
+    # the component by inverse CDF: the first k whose cumulative weight exceeds u (cheaper than multinomial)
+    u = torch.rand((*log_pi.shape[:-1], 1), generator=generator, device=log_pi.device, dtype=log_pi.dtype)
+    k = (log_pi.exp().cumsum(-1) < u).sum(-1, keepdim=True).clamp(max=log_pi.shape[-1] - 1)  # [..., Z, 1]
     m = mu.gather(-1, k).squeeze(-1)
     s = log_sigma.gather(-1, k).squeeze(-1).exp()
     eps = torch.randn(m.shape, generator=generator, device=m.device, dtype=m.dtype)
