@@ -72,6 +72,9 @@ WORLDMODELS = ["run.max_updates=6", "replay.min_size=60", "learner.batch_size=2"
                "algo.vae_frames=8", "algo.dream_max_steps=50", "algo.real_max_steps=20"]
 BUDGET.update({"worldmodels_carracing.yaml": WORLDMODELS, "worldmodels_doom_takecover.yaml": WORLDMODELS})
 SMOKE |= {"worldmodels_carracing.yaml", "worldmodels_doom_takecover.yaml"}
+# JEPA: reward-free random data; small windows and batches, a high train ratio (the loss includes SIGReg)
+BUDGET["jepa_nav_tworooms.yaml"] = ["run.max_updates=25", "replay.min_size=200", "learner.batch_size=8",
+                                    "replay.samples_per_insert=40", "replay.error_buffer=40", "replay.capacity_steps=4000"]
 SCORE_BATCHES = 6  # fixed batches each state is scored on
 
 

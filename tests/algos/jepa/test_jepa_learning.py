@@ -17,7 +17,8 @@ from wmdist.runtime.local import LocalSession
 
 
 def small_config(**kw) -> JepaConfig:
-    cfg = JepaConfig(cnn_depth=8, embed_dim=8, proj_hidden=64, pred_hidden=64, sigreg_projections=32, lr=1e-3, **kw)
+    base = dict(cnn_depth=8, embed_dim=8, proj_hidden=64, pred_hidden=64, sigreg_projections=32, lr=1e-3)
+    cfg = JepaConfig(**{**base, **kw})
     cfg.planner = dataclasses.replace(cfg.planner, horizon=3, candidates=32, top_k=4, iterations=3)
     return cfg
 

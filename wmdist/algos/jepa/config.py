@@ -32,6 +32,9 @@ class JepaConfig:
     # --- acting -----------------------------------------------------------------------
     planner: CEMConfig = section(CEMConfig, "CEM planner toward the goal embedding, run at every step (MPC; "
                                             "LeWM: J 300, K 30, I 30)")
+    goal_cost: str = param("last", "planning cost: last = squared distance of the last predicted embedding to the goal's "
+                                   "(LeWM); sum = summed over every predicted step (fixes the first action)",
+                           choices=("last", "sum"))
     explore_keep: float = param(0.8, "collectors act at random (reward-free data): probability that a step keeps "
                                      "the previous random action, so runs go straight and cross rooms", ge=0, lt=1)
 

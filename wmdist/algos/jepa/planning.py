@@ -1,5 +1,10 @@
 """JEPA's CEM objective: minus the squared distance between the last predicted embedding and
-the goal image's embedding (LeWorldModel's planning cost, docs/reference.md).
+the goal image's embedding (LeWorldModel's planning cost, docs/reference.md), or, with
+`goal_cost: sum`, minus the sum of the squared distances of every predicted step.
+
+The last-step cost only sees where a sequence ends, so every ordering of the same moves
+scores alike and the first action (the one MPC takes) is left to the noise of the elites;
+the sum prefers sequences that get there early, which pins the first action down.
 
 Each candidate action sequence of each env is rolled forward with the predictor from that
 env's last h embeddings (and the h - 1 actions between them); the planner in
@@ -33,14 +38,19 @@ def goal_distance_fn(model: JepaModel,
                      z_hist: torch.Tensor,  # [E, h, D]
                      a_past: torch.Tensor,  # [E, h-1, A]
                      z_goal: torch.Tensor,  # [E, D] the goal image's embedding
+                     cost: str = "last",  # "last": the last step's distance; "sum": every step's
                      ) -> ScoreFn:
-    """A score function actions [E, J, H, A] -> -||z_{t+H} - z_goal||^2 [E, J]."""
+    """A score function actions [E, J, H, A] -> -||z_{t+H} - z_goal||^2 (or -sum_k ||z_{t+k} - z_goal||^2) [E, J]."""
+    if cost not in ("last", "sum"):
+        raise ValueError(f"goal cost must be 'last' or 'sum', got {cost!r}")
 
     @torch.no_grad()
     def score(actions: torch.Tensor) -> torch.Tensor:
         e, j, horizon, a_dim = actions.shape
         rep = lambda x: x.repeat_interleave(j, 0)  # candidates of one env are adjacent  # noqa: E731
-        z_last = rollout(model, rep(z_hist), rep(a_past), actions.reshape(e * j, horizon, a_dim))[:, -1]  # [E*J, D]
-        return -((z_last - rep(z_goal)) ** 2).sum(-1).reshape(e, j)
+        z = rollout(model, rep(z_hist), rep(a_past), actions.reshape(e * j, horizon, a_dim))  # [E*J, H, D]
+        if cost == "last":
+            z = z[:, -1:]
+        return -((z - rep(z_goal)[:, None]) ** 2).sum((-1, -2)).reshape(e, j)
 
     return score
