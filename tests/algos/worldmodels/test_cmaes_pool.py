@@ -79,3 +79,44 @@ def test_a_killed_actor_costs_no_candidate_on_ray(ray_session, tmp_path):
     assert pool.model_loads >= 3
     for a in actors:
         ray.kill(a)
+
+
+def test_a_killed_dream_actor_is_restarted_and_its_share_scored_the_same(ray_session):
+    """The role's own actor class (`wm_eval`): killing one mid-generation changes no fitness,
+    since a share's dream depends only on its candidates and the rollout seeds."""
+    import dataclasses
+    import threading
+    import time
+
+    from wmdist.algos.worldmodels import WorldModelsConfig
+    from wmdist.algos.worldmodels.worker import EvalWorker
+    from wmdist.bench.cmaes import SPEC, _model
+
+    ray = ray_session
+    cfg = dataclasses.replace(WorldModelsConfig(), dream_max_steps=1000, popsize=8, rollouts=2)
+    model = _model(cfg)  # M never says done: every dream runs its 1000 steps (~0.5 s a share on a quiet core)
+    cls = ray.remote(EvalWorker).options(num_cpus=0.1, max_restarts=-1, max_task_retries=0)
+    actors = [cls.remote(None, SPEC, i, 1, algo_config=cfg) for i in range(2)]
+    pids = ray.get([a.pid.remote() for a in actors])
+    params = np.random.default_rng(0).normal(0, 0.1, (8, (32 + 256) * 3 + 3))
+    seeds = np.arange(2)
+    pool = EvalPool(actors, shares_per_actor=1)
+    calm = pool.evaluate(params, seeds, 1, lambda: model)
+    killer = threading.Timer(0.05, lambda: ray.kill(actors[0], no_restart=False))  # mid-share
+    killer.start()
+    t0 = time.monotonic()
+    again = pool.evaluate(params, seeds, 1, lambda: model)
+    killer.join()
+    assert time.monotonic() - t0 > 0.05, "the generation ended before the kill: nothing was tested"
+    assert pool.retries >= 1
+    np.testing.assert_array_equal(again, calm)  # no candidate lost, none scored differently
+    deadline = time.monotonic() + 60
+    while True:  # the actor may still be coming back (its share went to the other one)
+        try:
+            assert ray.get(actors[0].pid.remote()) != pids[0]
+            break
+        except ray.exceptions.ActorUnavailableError:
+            assert time.monotonic() < deadline, "the killed actor never came back"
+            time.sleep(0.5)
+    for a in actors:
+        ray.kill(a)
