@@ -5,7 +5,7 @@ from wmdist.envs import EnvConfig, check_id, env_spec, list_families, make_env
 
 def test_list_families_names_every_prefix_with_examples():
     fams = dict(list_families())
-    assert set(fams) == {"gym", "dmc", "atari", "minatar", "board"}
+    assert set(fams) == {"gym", "dmc", "atari", "minatar", "board", "carracing", "vizdoom", "nav"}
     assert "dmc:walker-walk" in fams["dmc"] and "atari:Pong" in fams["atari"] and "minatar:Breakout" in fams["minatar"]
 
 
