@@ -10,7 +10,6 @@ from __future__ import annotations
 import time
 from typing import Iterator
 
-import numpy as np
 import torch
 
 from wmdist.algos.muzero import MuZero, MuZeroConfig

@@ -42,7 +42,7 @@ import redis
 
 from wmdist.algos.base import FieldSpec
 from wmdist.replay.batch import SequenceBatch
-from wmdist.replay.codec import CodecError, decode_record, encode_record
+from wmdist.replay.codec import CodecError, encode_record
 from wmdist.replay.layout import RecordLayout, layout_for, schema_of
 
 
