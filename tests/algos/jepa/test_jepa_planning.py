@@ -121,3 +121,16 @@ def test_check_run_refuses_evaluations_that_could_come_before_training():
     run.replay = dataclasses.replace(run.replay, seq_len=1)
     with pytest.raises(ValueError, match="seq_len"):
         algo.check_run(run)
+
+
+def test_embedding_plot_of_a_planned_episode(tmp_path):
+    from wmdist.algos.jepa.trajectory_plot import planned_episode
+
+    algo = Jepa(SPEC, small_config(), seed=0)
+    weights = _trained_weights(algo, 5)
+    env = make_env(EnvConfig(id="nav:tworooms"), 0)
+    ep = planned_episode(algo, weights, env, steps=4)
+    steps = len(ep["planned"])
+    assert ep["real"].shape == (steps + 1, 8) and ep["planned"].shape == (steps, 3, 8) and ep["goal"].shape == (8,)
+    path = algo.embedding_plot(weights, make_env(EnvConfig(id="nav:tworooms"), 0), str(tmp_path / "plan.png"), steps=4)
+    assert (tmp_path / "plan.png").stat().st_size > 1000 and path.endswith("plan.png")

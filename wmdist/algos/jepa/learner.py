@@ -65,7 +65,9 @@ class JepaLearner(Learner):
         reg = sigreg(real, dirs, cfg.sigreg_knots, cfg.sigreg_t_max)
         loss = pred_loss + cfg.sigreg_weight * reg
         with torch.no_grad():
+            copy = ((z_hist[:, :, -1] - target) ** 2).mean(-1)  # [B, T-h] predicting no change: the bar to beat
             metrics = {"loss": float(loss), "pred_loss": float(pred_loss), "sigreg": float(reg),
+                       "copy_loss": float((copy * w).sum() / w.sum().clamp(min=1.0)),
                        "effective_rank": effective_rank(real), "embed_std": float(real.std(0).mean())}
         return loss, metrics
 
