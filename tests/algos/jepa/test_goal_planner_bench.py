@@ -1,0 +1,12 @@
+"""`wmdist bench goal_planner` (wmdist/bench/goal_planner.py): one case per algorithm and E, with positive times."""
+from __future__ import annotations
+
+from wmdist.bench import goal_planner
+
+
+def test_goal_planner_bench_times_both_planners():
+    cases = list(goal_planner.run(quick=True))
+    assert [c["case"] for c in cases] == ["jepa_E1", "planet_E1", "jepa_E10", "planet_E10"]
+    for c in cases:
+        assert c["ms_per_decision"] > 0 and c["ms_per_decision_cpu"] > 0
+        assert (c["horizon"], c["candidates"], c["top_k"], c["iterations"]) == (5, 100, 10, 10)  # the JEPA preset's
