@@ -10,7 +10,7 @@ RUN_ARGS ?= --set run.max_minutes=6
 SYSTEM_PACKAGES := redis-server prometheus libegl1 libegl-mesa0 libgl1-mesa-dri
 export MUJOCO_GL ?= egl
 
-.PHONY: setup system-deps run test bench clean
+.PHONY: setup system-deps run test bench gpu-check clean
 
 setup: $(STAMP)
 
@@ -40,6 +40,9 @@ test: setup system-deps
 
 bench: setup
 	$(BIN)/wmdist bench all --json
+
+gpu-check: setup  # every preset's learner and collector on CUDA vs the CPU path (skips without CUDA)
+	timeout 480 $(BIN)/python -m wmdist.bench.gpu_check
 
 clean:
 	rm -rf $(VENV) runs .pytest_cache
