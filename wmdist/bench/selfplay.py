@@ -53,6 +53,37 @@ def measure(num_envs: int, simulations: int, steps: int, seed: int = 0) -> dict:
     }
 
 
+def fast_vs_module(num_envs: int, simulations: int, steps: int, seed: int = 0) -> dict:
+    """The MLP fast inference path against the module path, steps interleaved (same seed: the
+    two make identical searches, so they step identical envs)."""
+    env_cfg = EnvConfig(id="gym:CartPole-v1")
+    runs = {}
+    for name in ("module", "fast"):
+        venv = make_vector_env(env_cfg, num_envs, seed)
+        policy = MuZero(venv.spec, _config(simulations), seed).make_policy()
+        if name == "module":
+            policy.searcher.fast = None
+        step = venv.reset()
+        policy.act(step.obs, step.first, step.legal, step.to_play, True)  # warm-up
+        runs[name] = [venv, policy, step, 0.0, 0.0]  # venv, policy, last step, seconds, network seconds
+    for _ in range(steps):
+        for r in runs.values():
+            venv, policy, step = r[0], r[1], r[2]
+            t = time.perf_counter()
+            actions, _ = policy.act(step.obs, step.first, step.legal, step.to_play, True)
+            r[2] = venv.step(actions)
+            r[3] += time.perf_counter() - t
+            r[4] += policy.last_net_seconds
+    for r in runs.values():
+        r[0].close()
+    rate = {k: steps * num_envs / r[3] for k, r in runs.items()}
+    return {"case": "fast_mlp_vs_module", "envs": num_envs, "simulations": simulations, "steps": steps * num_envs,
+            "module_env_steps_per_s": round(rate["module"], 1), "fast_env_steps_per_s": round(rate["fast"], 1),
+            "module_network_share": round(runs["module"][4] / runs["module"][3], 3),
+            "fast_network_share": round(runs["fast"][4] / runs["fast"][3], 3),
+            "speedup": round(rate["fast"] / rate["module"], 2)}
+
+
 def run(quick: bool = False) -> Iterator[dict]:
     torch.set_num_threads(1)
     steps = 10 if quick else 60
@@ -63,6 +94,7 @@ def run(quick: bool = False) -> Iterator[dict]:
         case = measure(e, 50, steps)
         case["speedup_vs_E1"] = round(case["env_steps_per_s"] / base["env_steps_per_s"], 2)
         yield case
+    yield fast_vs_module(32, 50, steps)
 
 
 if __name__ == "__main__":  # pragma: no cover
