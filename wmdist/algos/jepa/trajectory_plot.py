@@ -72,3 +72,26 @@ def plot_planned_episode(algo: "Jepa", weights: Weights, env: Env, path: str, st
     fig.savefig(path, dpi=100)
     plt.close(fig)
     return path
+
+
+def main(argv: list[str] | None = None) -> int:
+    """`python -m wmdist.algos.jepa.trajectory_plot RUN_DIR [OUT.png]`: the plot for a run's last
+    checkpoint (until `wmdist dream` calls `embedding_plot` for algorithms without a decoder)."""
+    import sys
+    from pathlib import Path
+
+    from wmdist.envs.factory import make_env
+    from wmdist.runtime.evaluate import load_run
+
+    args = sys.argv[1:] if argv is None else argv
+    if not args:
+        print("usage: python -m wmdist.algos.jepa.trajectory_plot RUN_DIR [OUT.png]", file=sys.stderr)
+        return 2
+    cfg, _, algo, _, weights, _ = load_run(args[0])
+    out = args[1] if len(args) > 1 else str(Path(args[0]) / "dream.png")
+    print(f"wmdist: embedding plot {algo.embedding_plot(weights, make_env(cfg.env, cfg.run.seed + 17), out)}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
