@@ -1,4 +1,8 @@
-"""Dreamer learner speed: gradient updates/s of the small V3 model on CPU, fp32 and bf16.
+"""Dreamer learner speed: gradient updates/s of the small V3 model on CPU, fp32, bf16 and auto.
+
+`auto` is both phases (world model; imagination + actor-critic) on `precision_*: auto`: after
+its start-up measurement it runs each phase in the precision it timed faster (issue 21:
+never slower than fp32).
 
 Target (issue 7): at least 2 updates/s for this model and batch.
 
@@ -23,8 +27,23 @@ from wmdist.envs.spec import EnvSpec
 from wmdist.runtime.malloc import tune_malloc
 
 
-def small_v3(bf16: bool) -> DreamerConfig:
-    return DreamerConfig(version=3, deter=256, units=256, mlp_layers=2, stoch=32, classes=32, bf16=bf16)
+def small_v3(bf16: bool, **over) -> DreamerConfig:
+    return DreamerConfig(version=3, deter=256, units=256, mlp_layers=2, stoch=32, classes=32, bf16=bf16, **over)
+
+
+def _auto_learner(spec: EnvSpec, trials: int):
+    """A learner with both phases on `auto`, its start-up measurement done on the bench batch."""
+    return Dreamer(spec, small_v3(False, precision_world_model="auto", precision_actor_critic="auto",
+                                  precision_trials=trials)).make_learner()
+
+
+def _finish_measuring(learner, batch) -> int:
+    """Runs `auto`'s start-up updates; returns how many it took."""
+    n = 0
+    while learner.precision.measuring:
+        learner.update(batch)
+        n += 1
+    return n
 
 
 def bench_spec(discrete: bool) -> EnvSpec:
@@ -210,14 +229,16 @@ def run(quick: bool = False) -> Iterator[dict]:
         batch = random_batch(spec, b, t)
         fp32 = Dreamer(spec, small_v3(False)).make_learner()
         bf16 = Dreamer(spec, small_v3(True)).make_learner()
-        if native:  # same batch: interleave the two precisions
+        auto = _auto_learner(spec, 1 if quick else 2)
+        auto_updates = _finish_measuring(auto, batch)  # without native bf16: none, fp32 at once
+        if native:  # same batch: interleave the three
             bb, bt = b, t
-            times = _time_side_by_side({"fp32": fp32, "bf16": bf16}, batch, updates)
+            times = _time_side_by_side({"fp32": fp32, "bf16": bf16, "auto": auto}, batch, updates)
         else:
             bb, bt = 2, 16
-            times = _time_side_by_side({"fp32": fp32}, batch, updates)
+            times = _time_side_by_side({"fp32": fp32, "auto": auto}, batch, updates)
             times.update(_time_side_by_side({"bf16": bf16}, random_batch(spec, bb, bt), 1))
-        dt, dt16 = times["fp32"], times["bf16"]
+        dt, dt16, dta = times["fp32"], times["bf16"], times["auto"]
         flops = _update_flops(fp32, batch)
         fast = bf16 if native else fp32
         yield {
@@ -228,11 +249,14 @@ def run(quick: bool = False) -> Iterator[dict]:
             "fp32_updates_per_s": round(1.0 / dt, 3),
             "bf16_updates_per_s": round(1.0 / dt16, 3), "bf16_batch": f"{bb}x{bt}",
             "bf16_speedup": round(dt / dt16, 2) if native else None,
+            "auto_updates_per_s": round(1.0 / dta, 3), "auto_speedup": round(dt / dta, 2),
+            "auto_choice": dict(auto.precision.choice), "auto_measuring_updates": auto_updates,
             "target_updates_per_s": 2.0,
-            "best_updates_per_s": round(1.0 / (min(dt, dt16) if native else dt), 3),
+            "best_updates_per_s": round(1.0 / (min(dt, dt16, dta) if native else min(dt, dta)), 3),
             "matmul_gflop_per_update": round(flops / 1e9, 1), "fp32_achieved_gflops": round(flops / 1e9 / dt, 1),
             "phase_seconds": {k: round(v, 3) for k, v in _split(fast, batch).items()},
             "phase_precision": "bf16" if native else "fp32",
+            "phase_seconds_fp32": {k: round(v, 3) for k, v in _split(fp32, batch).items()} if native else None,
             "top_ops": [] if quick else _top_ops(fast, batch),
         }
     spec = bench_spec(True)

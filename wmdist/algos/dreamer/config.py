@@ -115,7 +115,16 @@ class DreamerConfig:
     adam_eps: float | None = param(None, "Adam epsilon", gt=0)
     # pays where bf16 matmuls are native (AVX-512 BF16 / AMX CPUs, CUDA) and the model is large
     # enough for matmuls to dominate: 1.47x on the 256-unit model, ~1.1x at 128 (BENCHMARKS)
-    bf16: bool = param(False, "run the learner's forward passes under bfloat16 autocast (fp32 otherwise)")
+    bf16: bool = param(False, "run the learner's forward passes under bfloat16 autocast (fp32 otherwise); "
+                       "the default of both precision_* fields")
+    # per phase: the world model and the actor-critic gain differently from bf16 (BENCHMARKS)
+    precision_world_model: str | None = param(
+        None, "world-model phase: fp32, bf16, or auto (the first updates timed in each, the faster kept; "
+        "fp32 without native bf16); None follows `bf16`", choices=("fp32", "bf16", "auto"))
+    precision_actor_critic: str | None = param(
+        None, "imagination + actor-critic phase: fp32, bf16 or auto (as precision_world_model); None follows `bf16`",
+        choices=("fp32", "bf16", "auto"))
+    precision_trials: int = param(2, "auto: timed updates per precision after one warm-up update in each", ge=1)
 
     def resolved(self) -> "DreamerConfig":
         """A copy with every None replaced by the version's default (and the V3 size table)."""

@@ -10,6 +10,7 @@ import torch
 from wmdist.algos.base import Batch, Learner, NonFiniteLoss, UpdateResult, Weights
 from wmdist.algos.dreamer.config import DreamerConfig
 from wmdist.algos.dreamer.imagine import ActorCriticLoss, Start
+from wmdist.algos.dreamer.precision import PhasePrecision
 from wmdist.nets.kl import kl_loss, masked_mean
 from wmdist.nets.latent_layers import Latent
 from wmdist.algos.dreamer.nets import ActorCritic, WorldModel, action_to_model
@@ -51,9 +52,14 @@ class DreamerLearner(Learner):
         self.critic_opt = GuardedStep(self.ac.critic.parameters(), opt(cfg.critic_lr, cfg.ac_clip))
         self.generator = torch.Generator(self.device).manual_seed(seed)
         self.updates = 0
+        follow = "bf16" if cfg.bf16 else "fp32"
+        self.precision = PhasePrecision(
+            {"world_model": cfg.precision_world_model or follow, "actor_critic": cfg.precision_actor_critic or follow},
+            self.device, cfg.precision_trials)
 
     # --- losses ---------------------------------------------------------------------
     def _autocast(self):
+        """The whole update's forward under `bf16` (the precision of both phases before they were split)."""
         if self.cfg.bf16:
             return torch.autocast(self.device.type, dtype=torch.bfloat16)
         return contextlib.nullcontext()
@@ -109,16 +115,23 @@ class DreamerLearner(Learner):
     # --- Learner API ----------------------------------------------------------------
     def update(self, batch: Batch) -> UpdateResult:
         t = self._tensors(batch)
-        with self._autocast():
+        prec, spent = self.precision, {}  # spent: seconds per phase (while auto is measuring)
+        with prec.timed("world_model", spent), prec.autocast("world_model"):
             model_loss, metrics, start = self.world_model_loss(t)
+        if prec.mode("actor_critic") == "fp32" and start.deter.dtype != torch.float32:
+            start = Start(start.deter.float(), start.latent, start.cont)  # a bf16 world model hands over bf16 states
+        with prec.timed("actor_critic", spent), prec.autocast("actor_critic"):
             actor_loss, critic_loss, ac_metrics = self.ac_loss(start, self.generator)
         for name, loss in (("model", model_loss), ("actor", actor_loss), ("critic", critic_loss)):
             if not torch.isfinite(loss.detach()).all():
                 raise NonFiniteLoss(f"dreamer {name} loss is {float(loss.detach())}")
         # actor first: its graph reads the critic's and world model's current weights
-        metrics["actor_grad_norm"] = self.actor_opt(actor_loss)
-        metrics["critic_grad_norm"] = self.critic_opt(critic_loss)
-        metrics["model_grad_norm"] = self.wm_opt(model_loss)
+        with prec.timed("actor_critic", spent):
+            metrics["actor_grad_norm"] = self.actor_opt(actor_loss)
+            metrics["critic_grad_norm"] = self.critic_opt(critic_loss)
+        with prec.timed("world_model", spent):
+            metrics["model_grad_norm"] = self.wm_opt(model_loss)
+        metrics.update(prec.end_update(spent))
         self.updates += 1
         if self.cfg.slow_critic != "none" and self.updates % self.cfg.slow_critic_every == 0:
             self.ac.update_slow(self.cfg.slow_critic_mix)
@@ -134,6 +147,7 @@ class DreamerLearner(Learner):
             "wm_opt": self.wm_opt.state_dict(), "actor_opt": self.actor_opt.state_dict(),
             "critic_opt": self.critic_opt.state_dict(), "return_norm": self.ac_loss.norm.state_dict(),
             "generator": self.generator.get_state(), "updates": self.updates,
+            "precision": self.precision.state_dict(),
         }
 
     def load_state_dict(self, state: Mapping[str, Any]) -> None:
@@ -145,6 +159,7 @@ class DreamerLearner(Learner):
         self.ac_loss.norm.load_state_dict(state["return_norm"])
         self.generator.set_state(torch.as_tensor(state["generator"]))
         self.updates = int(state["updates"])
+        self.precision.load_state_dict(state.get("precision", {}))  # older checkpoints: measure again
 
 
 def _select(lat: Latent, rows: torch.Tensor) -> Latent:
