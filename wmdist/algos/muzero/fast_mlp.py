@@ -66,13 +66,16 @@ class FastMLPInference:
 
     @staticmethod
     def _expect(logits: torch.Tensor, atoms: torch.Tensor) -> torch.Tensor:
-        return h_inv((torch.softmax(logits.float(), dim=-1) * atoms).sum(-1))  # support_to_scalar
+        """`support_to_scalar` before its h^-1 (applied once to reward and value together)."""
+        return (torch.softmax(logits.float(), dim=-1) * atoms).sum(-1)
 
     def recurrent(self, latent: torch.Tensor, actions: np.ndarray):
         with torch.inference_mode():
             a = torch.as_tensor(np.asarray(actions), dtype=torch.int64, device=self.onehot.device)
             nxt = _scale(_run(self.dyn, torch.cat([latent, self.onehot[a]], dim=-1)))
-            reward = self._expect(_run(self.reward, nxt), self.reward_atoms).cpu().numpy()
-            value = self._expect(_run(self.value, nxt), self.value_atoms).cpu().numpy()
-            logits = _run(self.policy, nxt).float().cpu().numpy()
-        return reward, value, logits, nxt
+            # h^-1 is elementwise: one pass over [reward; value] gives each the same bits as its own pass
+            both = h_inv(torch.cat([self._expect(_run(self.reward, nxt), self.reward_atoms),
+                                    self._expect(_run(self.value, nxt), self.value_atoms)]))
+            both, logits = both.cpu().numpy(), _run(self.policy, nxt).float().cpu().numpy()
+        b = len(nxt)
+        return both[:b], both[b:], logits, nxt
