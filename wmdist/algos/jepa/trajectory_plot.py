@@ -83,6 +83,7 @@ def main(argv: list[str] | None = None) -> int:
     from wmdist.envs.factory import make_env
     from wmdist.runtime.evaluate import load_run
 
+    torch.set_num_threads(1)  # small batched calls: a second thread only waits on a shared machine
     args = sys.argv[1:] if argv is None else argv
     if not args:
         print("usage: python -m wmdist.algos.jepa.trajectory_plot RUN_DIR [OUT.png]", file=sys.stderr)
