@@ -6,11 +6,13 @@ needs PREDICTS_OBSERVATIONS) refuses other algorithms in one line, exit status 2
 from __future__ import annotations
 
 import ast
+import io
 from pathlib import Path
 
 import pytest
 
-from wmdist.algos.base import CAPABILITIES, PLANS, PREDICTS_OBSERVATIONS, REANALYZE, TWO_PLAYER, Algorithm
+from wmdist.algos.base import (CAPABILITIES, PLANS, PLOTS_EMBEDDINGS, PREDICTS_OBSERVATIONS, REANALYZE, TWO_PLAYER,
+                               Algorithm)
 from wmdist.algos.registry import ALGORITHMS, resolve
 from wmdist.cli import main
 from tests.runtime.run_dirs import run_dir_with_checkpoint
@@ -98,7 +100,7 @@ def test_runtime_cli_and_config_never_branch_on_an_algorithm_name():
 # --- 2. declared capabilities --------------------------------------------------------------
 
 def test_capability_constants_are_the_known_set():
-    assert CAPABILITIES == {PREDICTS_OBSERVATIONS, TWO_PLAYER, REANALYZE, PLANS}
+    assert CAPABILITIES == {PREDICTS_OBSERVATIONS, TWO_PLAYER, REANALYZE, PLANS, PLOTS_EMBEDDINGS}
     assert all(isinstance(c, str) for c in CAPABILITIES)
     assert Algorithm.capabilities == frozenset()
     with pytest.raises(ValueError, match="unknown capability"):
@@ -113,6 +115,7 @@ def test_registered_algorithms_declare_only_known_capabilities(name):
     # the declarations agree with the methods behind them
     assert cls.offers(REANALYZE) == (cls.make_reanalyzer is not Algorithm.make_reanalyzer)
     assert cls.offers(PREDICTS_OBSERVATIONS) == (cls.dream_video is not Algorithm.dream_video)
+    assert cls.offers(PLOTS_EMBEDDINGS) == (cls.embedding_plot is not Algorithm.embedding_plot)
 
 
 def test_dreamer_predicts_observations_and_muzero_plans():
@@ -152,3 +155,34 @@ def test_dream_on_a_dreamer_run_writes_the_video(tmp_path, capsys):
     out = capsys.readouterr().out
     assert "dream video" in out
     assert (run_dir / "dream.gif").stat().st_size > 0
+
+
+def test_dream_of_an_embedding_model_is_its_trajectory_plot(tmp_path):
+    """No decoder (JEPA): `wmdist dream` draws the planned embedding trajectory instead of a video."""
+    from wmdist.runtime.evaluate import dream_run
+
+    from wmdist.config.errors import ConfigError
+    from wmdist.config.loader import dump_yaml, load_config
+    from wmdist.runtime.checkpoint import save_checkpoint
+    from wmdist.runtime.local import LocalSession
+
+    untrained = run_dir_with_checkpoint(tmp_path / "untrained", "jepa_nav_tworooms")
+    with pytest.raises(ConfigError, match="before any training"):  # one line, not a traceback
+        dream_run(str(untrained), horizon=3, stream=io.StringIO())
+    cfg = load_config(str(Path(__file__).parents[2] / "configs" / "jepa_nav_tworooms.yaml"),
+                      [f"run.dir={tmp_path}", "ray.local=true", "actors.num=1", "actors.envs_per_actor=2",
+                       "actors.segment_steps=8", "learner.batch_size=4"])
+    session = LocalSession(cfg)
+    try:  # a few real updates on data the runtime's collector gathered
+        session.collect(3)
+        session.train(2, 4)
+        run = tmp_path / "trained"
+        run.mkdir()
+        (run / "config.yaml").write_text(dump_yaml(cfg))
+        save_checkpoint(run, {"learner": session.learner.state_dict()}, session.learner.get_weights(), 1,
+                        {"updates": 2, "env_steps": session.env_steps}, None, keep=1)
+    finally:
+        session.close()
+    out = io.StringIO()
+    assert dream_run(str(run), horizon=3, stream=out) == 0
+    assert "embedding plot" in out.getvalue() and (run / "dream.png").stat().st_size > 1000

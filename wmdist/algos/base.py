@@ -49,7 +49,10 @@ PREDICTS_OBSERVATIONS = "predicts_observations"  # decodes imagined observations
 TWO_PLAYER = "two_player"  # plays two-player games (acts for `to_play`, honours legal-action masks)
 REANALYZE = "reanalyze"  # has a reanalyze step: `make_reanalyzer` returns a Reanalyzer
 PLANS = "plans"  # searches or plans at decision time (e.g. MCTS), not only a policy network
-CAPABILITIES: frozenset[str] = frozenset({PREDICTS_OBSERVATIONS, TWO_PLAYER, REANALYZE, PLANS})
+# predicts embeddings, not observations (no decoder): `embedding_plot` (`wmdist dream` draws the planned
+# embedding trajectory against the real one instead of a video)
+PLOTS_EMBEDDINGS = "plots_embeddings"
+CAPABILITIES: frozenset[str] = frozenset({PREDICTS_OBSERVATIONS, TWO_PLAYER, REANALYZE, PLANS, PLOTS_EMBEDDINGS})
 
 
 @dataclass(frozen=True)
@@ -200,6 +203,11 @@ class Algorithm(ABC):
         (`context` filtered steps, then `horizon` imagined ones) to `path` and return the path.
         Only for algorithms that offer PREDICTS_OBSERVATIONS."""
         raise NotImplementedError(f"{type(self).__name__} does not predict observations")
+
+    def embedding_plot(self, weights: Weights, env: Env, path: str, steps: int = 30) -> str:
+        """Write a PNG of one planned episode's predicted embedding trajectory against the real
+        one to `path` and return the path. Only for algorithms that offer PLOTS_EMBEDDINGS."""
+        raise NotImplementedError(f"{type(self).__name__} does not plot embeddings")
 
     def step_fields(self) -> dict[str, FieldSpec]:
         """Every per-step field of a stored sequence."""

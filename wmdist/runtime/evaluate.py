@@ -9,7 +9,7 @@ from typing import IO, Callable
 
 import numpy as np
 
-from wmdist.algos.base import PREDICTS_OBSERVATIONS
+from wmdist.algos.base import PLOTS_EMBEDDINGS, PREDICTS_OBSERVATIONS
 from wmdist.config.errors import ConfigError
 from wmdist.runtime import checkpoint as ck
 from wmdist.runtime.board_eval import default_opponent, greedy_action, judge_lines, play_games
@@ -126,9 +126,19 @@ def record_video(cfg, algo, weights, version: int, path: str, max_steps: int = 1
 def dream_run(run_dir: str, out: str | None = None, horizon: int = 45, stream: IO[str] | None = None) -> int:
     stream = stream or sys.stdout
     cfg, spec, algo, version, weights, ckpt = load_run(run_dir)
-    if not algo.offers(PREDICTS_OBSERVATIONS):
-        raise ConfigError(f"dream needs an algorithm that predicts observations; {run_dir} trained {cfg.algo_name!r}")
     from wmdist.envs.factory import make_env
+
+    if not algo.offers(PREDICTS_OBSERVATIONS):
+        if algo.offers(PLOTS_EMBEDDINGS):  # no decoder: the planned embedding trajectory against the real one
+            path = out or str(Path(run_dir) / "dream.png")
+            try:
+                plot = algo.embedding_plot(weights, make_env(cfg.env, cfg.run.seed + 17), path, steps=horizon)
+            except ValueError as err:  # e.g. planning with untrained weights: one line
+                raise ConfigError(f"dream: {err}") from None
+            print(f"wmdist: embedding plot {plot}", file=stream)
+            return 0
+        raise ConfigError(f"dream needs an algorithm that predicts observations or embeddings; {run_dir} trained "
+                          f"{cfg.algo_name!r}")
 
     path = out or str(Path(run_dir) / "dream.gif")
     env = make_env(cfg.env, cfg.run.seed + 17)

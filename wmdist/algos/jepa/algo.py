@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from wmdist.algos.base import PLANS, Algorithm, FieldSpec, Weights
+from wmdist.algos.base import PLANS, PLOTS_EMBEDDINGS, Algorithm, FieldSpec, Weights
 from wmdist.algos.jepa.config import JepaConfig
 from wmdist.algos.jepa.learner import JepaLearner
 from wmdist.algos.jepa.policy import OBS_SHAPE, JepaPolicy
@@ -16,7 +16,7 @@ class Jepa(Algorithm):
     name = "jepa"
     Config = JepaConfig
     # every evaluation action is planned with CEM; there is no decoder, so no PREDICTS_OBSERVATIONS
-    capabilities = frozenset({PLANS})
+    capabilities = frozenset({PLANS, PLOTS_EMBEDDINGS})
 
     def __init__(self, spec: EnvSpec, config: JepaConfig | None = None, seed: int = 0) -> None:
         super().__init__(spec, config if config is not None else JepaConfig(), seed)
