@@ -87,9 +87,9 @@ RAY_PRESETS = sorted({
     "dreamerv3_cartpole.yaml",          # Dreamer
     "planet_dmc_cartpole_swingup.yaml",  # PlaNet: CEM planning in the collector, dm_control
 } & set(PRESETS))
-# Covered on Ray elsewhere: two-player self-play and reanalyze (tests/runtime/test_runtime.py's full
-# topology), World Models' pool role (tests/algos/worldmodels/test_cmaes_pool.py), a role an algorithm
-# adds (tests/runtime/test_roles_table.py).
+# Covered on Ray elsewhere: every built-in role with the fake algorithm (tests/runtime/test_runtime.py),
+# World Models' pool role (tests/algos/worldmodels/test_cmaes_pool.py), a role an algorithm adds
+# (tests/runtime/test_roles_table.py); two-player self-play in process (tests/algos/muzero/test_tictactoe.py).
 
 
 def _budget(preset: str) -> list[str]:
