@@ -126,6 +126,19 @@ def check_id(env_id: str) -> str:
     raise _unknown(env_id, candidates)
 
 
+# family -> (module, class) of its Env, constructed as cls(cfg, seed, name); imported on use
+# (each family pulls in its simulator). Board games take no EnvConfig and are built below.
+_CONSTRUCTORS: dict[str, tuple[str, str]] = {
+    "gym": ("wmdist.envs.gym_env", "GymEnv"),
+    "dmc": ("wmdist.envs.dmc", "DMCEnv"),
+    "atari": ("wmdist.envs.atari", "AtariEnv"),
+    "minatar": ("wmdist.envs.minatar", "MinAtarEnv"),
+    "carracing": ("wmdist.envs.carracing", "CarRacingEnv"),
+    "vizdoom": ("wmdist.envs.vizdoom_env", "VizDoomEnv"),
+    "nav": ("wmdist.envs.nav", "NavEnv"),
+}
+
+
 def make_env(cfg: EnvConfig, seed: int) -> Env:
     """Build the env `cfg.id`; its first `reset()` uses `seed` (an int >= 0)."""
     cfg.validate()
@@ -134,34 +147,11 @@ def make_env(cfg: EnvConfig, seed: int) -> Env:
     family, _, name = check_id(cfg.id).partition(":")
     if cfg.pixels and family != "dmc":
         raise ValueError(f"env.pixels applies to dmc ids only, not '{cfg.id}'")
-    if family == "gym":
-        from wmdist.envs.gym_env import GymEnv
+    if family in _CONSTRUCTORS:
+        import importlib
 
-        return GymEnv(cfg, seed, name)
-    if family == "dmc":
-        from wmdist.envs.dmc import DMCEnv
-
-        return DMCEnv(cfg, seed, name)
-    if family == "atari":
-        from wmdist.envs.atari import AtariEnv
-
-        return AtariEnv(cfg, seed, name)
-    if family == "minatar":
-        from wmdist.envs.minatar import MinAtarEnv
-
-        return MinAtarEnv(cfg, seed, name)
-    if family == "carracing":
-        from wmdist.envs.carracing import CarRacingEnv
-
-        return CarRacingEnv(cfg, seed, name)
-    if family == "vizdoom":
-        from wmdist.envs.vizdoom_env import VizDoomEnv
-
-        return VizDoomEnv(cfg, seed, name)
-    if family == "nav":
-        from wmdist.envs.nav import NavEnv
-
-        return NavEnv(cfg, seed, name)
+        module, cls = _CONSTRUCTORS[family]
+        return getattr(importlib.import_module(module), cls)(cfg, seed, name)
     if cfg.action_repeat != 1:
         raise ValueError(f"env.action_repeat must be 1 for board games, got {cfg.action_repeat}")
     from wmdist.envs.boardgames.env import BoardEnv
