@@ -10,20 +10,19 @@ warm-up too); the posterior still follows every observation.
 """
 from __future__ import annotations
 
-import numpy as np
 import torch
 
-from wmdist.algos.base import Policy, Weights
+from wmdist.algos.base import Weights
+from wmdist.algos.filtering import FilteringPolicy
 from wmdist.algos.planet.config import PlaNetConfig
 from wmdist.algos.planet.planning import reward_sum_fn
 from wmdist.envs.spec import EnvSpec
-from wmdist.nets.actions import action_to_env, action_to_model
-from wmdist.nets.latent_layers import Latent
+from wmdist.nets.actions import action_to_env
 from wmdist.nets.world_model import WorldModel, load_world_model
 from wmdist.search.cem import cem_plan, shift_plan
 
 
-class PlaNetPolicy(Policy):
+class PlaNetPolicy(FilteringPolicy):
     """Carries (h, z, previous action, previous plan) per env; resets rows where `first`."""
 
     def __init__(self, cfg: PlaNetConfig, spec: EnvSpec, device: str = "cpu", seed: int = 0) -> None:
@@ -31,9 +30,6 @@ class PlaNetPolicy(Policy):
         self.wm = WorldModel(cfg.world_model(), spec).to(self.device).eval()
         self.generator = torch.Generator(self.device).manual_seed(seed)
         self.version = -1
-        self.h: torch.Tensor | None = None  # [E, D]
-        self.z: Latent | None = None
-        self.prev_action: torch.Tensor | None = None  # [E, A] model space
         self.plan: torch.Tensor | None = None  # [E, H, A] the last plan (warm start)
 
     def set_weights(self, weights: Weights, version: int) -> None:
@@ -41,20 +37,13 @@ class PlaNetPolicy(Policy):
         self.version = version
 
     def reset(self, num_envs: int) -> None:
-        self.h, self.z = self.wm.rssm.initial(num_envs, self.device)
-        self.prev_action = torch.zeros(num_envs, self.spec.action_dim, device=self.device)
+        super().reset(num_envs)
         self.plan = None
 
     @torch.no_grad()
     def act(self, obs, first, legal, to_play, explore):  # type: ignore[override]
-        obs_t = torch.as_tensor(np.array(obs), device=self.device)
-        e = obs_t.shape[0]
-        if self.h is None or self.h.shape[0] != e:
-            self.reset(e)
-        assert self.h is not None and self.z is not None and self.prev_action is not None
-        restart = torch.as_tensor(np.asarray(first, bool), device=self.device)  # [E]
-        keep = (~restart).float().unsqueeze(-1)  # [E, 1]
-        h, z = self.wm.filter_step(self.h, self.z, self.prev_action, obs_t, keep, self.generator)
+        h, z, restart = self.filter(obs, first)
+        e = h.shape[0]
         a_dim, planner = self.spec.action_dim, self.cfg.planner
         if explore and self.version <= 0:  # an untrained model: a seed-episode action, no planning
             action = torch.rand((e, a_dim), generator=self.generator, device=self.device) * 2 - 1
@@ -73,7 +62,3 @@ class PlaNetPolicy(Policy):
             action = (action + self.cfg.expl_noise * noise).clamp(-1, 1)
         self.h, self.z, self.prev_action, self.plan = h, z, action, result.mean
         return action_to_env(action, self.spec), {}
-
-    def taken(self, actions: np.ndarray) -> None:
-        """The warm-up's random actions replace the ones returned: the filter's next step sees them."""
-        self.prev_action = action_to_model(torch.as_tensor(np.asarray(actions), device=self.device), self.spec)
