@@ -80,7 +80,8 @@ def main() -> None:
         stats = topo.replay.stats()
         print(json.dumps({
             "status": result.status, "message": result.message, "before": before, "after": after,
-            "doomed": doomed.node_id, "spare": spare.node_id, "restarts": result.counters.restarts,
+            "doomed": doomed.node_id, "spare": spare.node_id, "workers": [w.node_id for w in workers],
+            "restarts": result.counters.restarts,
             "env_steps": result.counters.env_steps, "updates": result.counters.updates,
             "acked": driver.acked, "stored": stats.get("size_sequences", 0),
             "evicted": stats.get("drops_evicted", 0), "inserts": stats.get("inserts", 0),
