@@ -1,14 +1,18 @@
 """Replay throughput against raw limits measured in the same run.
 
 Cases: vector observations (T=64, 20 float32) and pixels (T=64, 64x64x3 uint8), 1 and 2
-shards, memory and redis backends (a private redis-server, appendfsync everysec). Each case
-reports inserts and samples per second and MB/s through the real service (Ray actors,
-limiter off), next to the raw limit for the same bytes: a numpy copy (memory backend) or
-redis-py pipelined SET / GET of one blob per sequence (redis backend; a raw sample also cuts
-its blobs into the batch arrays, and the GET alone is reported too); figures are medians
-over rounds that alternate service and raw calls, so machine load hits both alike (the
-cyclic GC paused while timing, since its pauses land on either side at random). Also the
-memory per stored step against the raw bytes per step.
+shards, three variants side by side: the memory backend through shared memory (`memory`,
+the default), the memory backend with `replay.shm` off (`memory-actor`: rows through actor
+calls, as for a client on another node) and redis (a private redis-server, appendfsync
+everysec). Each reports inserts and samples per second and MB/s through the real service
+(Ray actors, limiter off), next to the raw limit for the same bytes: a numpy copy (memory)
+or redis-py pipelined SET / GET of one blob per sequence (redis; a raw sample also cuts its
+blobs into the batch arrays, and the GET alone is reported too). Figures are medians over
+rounds that alternate every variant at 1 and 2 shards and both raw limits, so machine load
+hits all alike (the cyclic GC paused while timing, since its pauses land on either side at
+random). After each observation kind's rows, one row of ratios per shard count (shm / redis,
+shm / actor calls) and one of 2-shard / 1-shard sample ratios. Also the memory per stored
+step against the raw bytes per step.
 """
 from __future__ import annotations
 
@@ -115,71 +119,121 @@ class _RawRedis:
             self.r.delete(*self.keys[j:j + 1000])
 
 
-def _case(kind: str, shards: int, backend: str, quick: bool, run_dir: str) -> dict:
+# (label, backend, replay.shm): the default memory backend through shared memory, the same
+# backend with shm off (rows through actor calls: what a client on another node gets), redis
+VARIANTS = (("memory", "memory", True), ("memory-actor", "memory", False), ("redis", "redis", True))
+
+
+def _cases(kind: str, shard_counts: list[int], quick: bool, run_dir: str) -> list[dict]:
+    """Every variant at every shard count on the same batches, their rounds interleaved (so
+    load hits all alike): one row per service, one row of ratios per shard count, and one of
+    2-shard / 1-shard sample ratios."""
     from wmdist.runtime.replay_client import create_replay
 
     fields = _fields(kind)
     ins_batch = 32 if kind == "vector" else 8  # sequences per insert call
     sample_b = 32 if kind == "vector" else 16
     reps = (6 if quick else 64) if kind == "vector" else (4 if quick else 24)  # medians of many rounds
-    capacity_seq = ins_batch * (reps + 1) * 2
-    cfg = ReplayConfig(backend=backend, shards=shards, capacity_steps=capacity_seq * T, seq_len=T,
-                       min_size=0, samples_per_insert=0, shard_cpus=0.1)
+    # 8x what the rounds insert: a shard holds well over 16 inserts' worth, so a client's
+    # reservations ahead (at most 1/16 of a shard) cover several inserts, as in any real-sized
+    # buffer (1M steps by default); only written rows take memory
+    capacity_seq = ins_batch * (reps + 1) * 8
     rng = np.random.default_rng(0)
     batches = [_batch(fields, ins_batch, i * ins_batch, rng) for i in range(reps + 1)]
     seq_bytes = batches[0].nbytes / ins_batch
-    client = create_replay(cfg, fields, run_dir, f"bench-{kind}-{shards}-{backend}")
-    raw = None
+    services = [(label, backend, shm, S) for S in shard_counts for label, backend, shm in VARIANTS]
+    clients: dict[tuple[str, int], object] = {}
+    raws: dict = {}
+    ins: dict = {}
+    smp: dict = {}
+    stats, used = {}, {}
     try:
-        rc = client._server.client() if backend == "redis" else None
-        used0 = rc.info("memory")["used_memory"] if rc else 0
-        client.insert(batches[-1], source_id=0)  # warm up actors and connections
-        client.sample(sample_b)
-        raw = _RawNumpy(batches[0], capacity_seq) if backend == "memory" else _RawRedis(rc, batches[0])
-        # rounds alternate service and raw calls on the same bytes, so load noise hits both; the
-        # cyclic GC is paused while timing (its pauses land on either side at random)
+        for label, backend, shm, S in services:
+            cfg = ReplayConfig(backend=backend, shards=S, capacity_steps=capacity_seq * T, seq_len=T, min_size=0,
+                               samples_per_insert=0, shard_cpus=0.1, shm=shm)
+            name = f"bench-{kind}-{S}-{label}"  # its own directory: a private redis-server each
+            clients[label, S] = create_replay(cfg, fields, os.path.join(run_dir, name), name)
+        servers = {key: c._server.client() for key, c in clients.items() if key[0] == "redis"}
+        rc = servers["redis", shard_counts[0]]  # the raw redis limit runs on this one's server
+        used = {key: r.info("memory")["used_memory"] for key, r in servers.items()}
+        for c in clients.values():
+            c.insert(batches[-1], source_id=0)  # warm up actors, connections and mappings
+            c.sample(sample_b)
+        raws = {"raw_numpy": _RawNumpy(batches[0], capacity_seq), "raw_redis": _RawRedis(rc, batches[0])}
+        # rounds alternate every service and both raw limits on the same bytes, so load noise hits
+        # all; the cyclic GC is paused while timing (its pauses land on any side at random)
         gc.collect()
         gc.disable()
-        ins, raw_ins = [], []
+        for k in [*clients, *raws, "raw_redis_get"]:
+            ins[k], smp[k] = [], []
         for i in range(reps):
-            ins.append(_time(lambda: client.insert(batches[i], source_id=i)))
-            raw_ins.append(_time(lambda: raw.put(batches[i], i)))
-        st = client.stats()
-        mem_raw = rc.info("memory")["used_memory"] - used0 if rc else 0
-        smp, raw_smp, raw_bytes = [], [], []
+            for key, c in clients.items():
+                ins[key].append(_time(lambda: c.insert(batches[i], source_id=i)))
+            for k, raw in raws.items():
+                ins[k].append(_time(lambda: raw.put(batches[i], i)))
+        stats = {key: c.stats() for key, c in clients.items()}
+        used = {key: r.info("memory")["used_memory"] - used[key] for key, r in servers.items()}
         for i in range(reps):
-            smp.append(_time(lambda: client.sample(sample_b)))
-            raw_smp.append(_time(lambda: raw.get(sample_b, i)))
-            if backend == "redis":
-                raw_bytes.append(_time(lambda: raw.get_bytes(sample_b, i)))
+            for key, c in clients.items():
+                smp[key].append(_time(lambda: c.sample(sample_b)))
+            for k, raw in raws.items():
+                smp[k].append(_time(lambda: raw.get(sample_b, i)))
+            smp["raw_redis_get"].append(_time(lambda: raws["raw_redis"].get_bytes(sample_b, i)))
     finally:
         gc.enable()
-        if isinstance(raw, _RawRedis):
-            raw.close()
-        client.close()
-    raw_step = seq_bytes / T  # fields + 1-byte mask
-    if backend == "memory":  # preallocated rings + index, per step of capacity
-        mem = st["bytes"] / (st["capacity_sequences"] * T)
-    else:  # redis-server's own accounting, per stored step (service records + raw blobs so far)
-        stored = st["size_sequences"] + reps * ins_batch
-        mem = mem_raw / (stored * T)
+        if "raw_redis" in raws:
+            raws["raw_redis"].close()
+        for c in clients.values():
+            c.close()
     med = lambda xs: float(np.median(xs))  # noqa: E731
-    ins_sps, smp_sps = ins_batch / med(ins), sample_b / med(smp)
-    raw_ins_sps, raw_smp_sps = ins_batch / med(raw_ins), sample_b / med(raw_smp)
-    mb = seq_bytes / 1e6
-    return {
-        "bench": "replay", "obs": kind, "shards": shards, "backend": backend, "seq_len": T,
-        "insert_batch": ins_batch, "sample_batch": sample_b, "rounds": reps, "seq_bytes": int(seq_bytes),
-        "insert_seq_per_s": round(ins_sps, 1), "insert_mb_per_s": round(ins_sps * mb, 1),
-        "sample_seq_per_s": round(smp_sps, 1), "sample_mb_per_s": round(smp_sps * mb, 1),
-        "raw": "numpy copy" if backend == "memory" else "redis-py pipelined SET/GET",
-        "raw_insert_mb_per_s": round(raw_ins_sps * mb, 1), "raw_sample_mb_per_s": round(raw_smp_sps * mb, 1),
-        "insert_vs_raw": round(ins_sps / raw_ins_sps, 3), "sample_vs_raw": round(smp_sps / raw_smp_sps, 3),
-        **({"raw_get_only_mb_per_s": round(sample_b / med(raw_bytes) * mb, 1),
-            "sample_vs_raw_get_only": round(smp_sps / (sample_b / med(raw_bytes)), 3)} if raw_bytes else {}),
-        "bytes_per_stored_step": round(mem, 1), "raw_bytes_per_step": round(raw_step, 1),
-        "memory_vs_raw": round(mem / raw_step, 3), "load_avg_1m": round(os.getloadavg()[0], 1),
-    }
+    ins_sps = {k: ins_batch / med(v) for k, v in ins.items() if v}
+    smp_sps = {k: sample_b / med(v) for k, v in smp.items() if v}
+    mb, raw_step = seq_bytes / 1e6, seq_bytes / T  # raw bytes per step: fields + 1-byte mask
+    load = round(os.getloadavg()[0], 1)
+    rows = []
+    for label, backend, _, S in services:
+        key, st = (label, S), stats[label, S]
+        raw = "raw_numpy" if backend == "memory" else "raw_redis"
+        if backend == "memory":  # preallocated rings + index, per step of capacity
+            mem = st["bytes"] / (st["capacity_sequences"] * T)
+        else:  # redis-server's own accounting, per stored step (service records, + raw blobs on rc's)
+            blobs = reps * ins_batch if S == shard_counts[0] else 0
+            mem = used[key] / ((st["size_sequences"] + blobs) * T)
+        rows.append({
+            "bench": "replay", "obs": kind, "shards": S, "backend": label, "seq_len": T,
+            "insert_batch": ins_batch, "sample_batch": sample_b, "rounds": reps, "seq_bytes": int(seq_bytes),
+            "insert_seq_per_s": round(ins_sps[key], 1), "insert_mb_per_s": round(ins_sps[key] * mb, 1),
+            "sample_seq_per_s": round(smp_sps[key], 1), "sample_mb_per_s": round(smp_sps[key] * mb, 1),
+            "raw": "numpy copy" if raw == "raw_numpy" else "redis-py pipelined SET/GET",
+            "raw_insert_mb_per_s": round(ins_sps[raw] * mb, 1), "raw_sample_mb_per_s": round(smp_sps[raw] * mb, 1),
+            "insert_vs_raw": round(ins_sps[key] / ins_sps[raw], 3),
+            "sample_vs_raw": round(smp_sps[key] / smp_sps[raw], 3),
+            **({"raw_get_only_mb_per_s": round(smp_sps["raw_redis_get"] * mb, 1),
+                "sample_vs_raw_get_only": round(smp_sps[key] / smp_sps["raw_redis_get"], 3)}
+               if raw == "raw_redis" else {}),
+            **({"stale_reads": int(st.get("stale_reads", 0))} if label == "memory" else {}),
+            "bytes_per_stored_step": round(mem, 1), "raw_bytes_per_step": round(raw_step, 1),
+            "memory_vs_raw": round(mem / raw_step, 3), "load_avg_1m": load,
+        })
+    def ins_ratio(a: tuple, b: tuple) -> float:
+        return round(ins_sps[a] / ins_sps[b], 3)
+
+    def smp_ratio(a: tuple, b: tuple) -> float:
+        return round(smp_sps[a] / smp_sps[b], 3)
+
+    for S in shard_counts:
+        rows.append({
+            "bench": "replay", "obs": kind, "shards": S, "compare": "memory (shm) / redis, memory (shm) / actor calls",
+            "insert_shm_vs_redis": ins_ratio(("memory", S), ("redis", S)),
+            "sample_shm_vs_redis": smp_ratio(("memory", S), ("redis", S)),
+            "insert_shm_vs_actor": ins_ratio(("memory", S), ("memory-actor", S)),
+            "sample_shm_vs_actor": smp_ratio(("memory", S), ("memory-actor", S)),
+            "load_avg_1m": load,
+        })
+    if 1 in shard_counts and 2 in shard_counts:  # two shards should sample at least as fast as one
+        rows.append({"bench": "replay", "obs": kind, "compare": "sample, 2 shards / 1 shard",
+                     **{f"sample_2_vs_1_{label}": smp_ratio((label, 2), (label, 1)) for label, _, _ in VARIANTS}})
+    return rows
 
 
 def run(quick: bool = False) -> Iterator[dict]:
@@ -190,11 +244,8 @@ def run(quick: bool = False) -> Iterator[dict]:
         ray.init(address="local", num_cpus=2, include_dashboard=False, log_to_driver=False, configure_logging=False)
     try:
         with tempfile.TemporaryDirectory(prefix="wmdist-bench-replay-") as run_dir:
-            kinds = ["vector"] if quick else ["vector", "pixels"]
-            for kind in kinds:
-                for shards in [1] if quick else [1, 2]:
-                    for backend in ("memory", "redis"):
-                        yield _case(kind, shards, backend, quick, run_dir)
+            for kind in ["vector"] if quick else ["vector", "pixels"]:
+                yield from _cases(kind, [1] if quick else [1, 2], quick, run_dir)
     finally:
         if started:
             ray.shutdown()

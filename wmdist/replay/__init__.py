@@ -2,14 +2,30 @@
 
 Pieces: `writer.SequenceWriter` (steps -> fixed windows, in collectors), `shard.ReplayShard`
 (index + `sumtree.SumTree` sampler + storage), `storage_memory` / `storage_redis`,
-`limiter.RateLimiter`, `codec` (msgpack arrays, never pickle), `redis_server` (private
-server launcher). The Ray actors and the client are `wmdist/runtime/replay_{actor,client}.py`.
+`shard_shm.ShmShard` (a shard living in a `shm.ShmSegment`, with `storage_shm`,
+`shm_rows`, `reservations`), `limiter.RateLimiter`, `codec` (msgpack arrays, never pickle),
+`redis_server` (private server launcher). The Ray actors and the client are
+`wmdist/runtime/replay_{actor,client,shm}.py`.
 
 Where the bytes go (a Ray actor call costs ~1-5 ms and copies what it carries):
-- memory backend: a collector's complete windows travel as one `SequenceBatch` in one
-  batched actor call per destination shard (Ray's object store carries the numpy buffers);
-  the shard copies them once into its preallocated ring arrays. A sample is one call per
-  shard returning the gathered rows `[k, T, ...]`.
+- memory backend, shared memory (the default, `replay.shm`): each shard keeps its ring
+  arrays `[C, T, ...]`, mask, per-slot index and counters in one POSIX shared-memory
+  segment (`shard_shm.py`); processes on its node map it. An insert writes the rows into
+  slots the client reserved ahead (a reservation takes the slot's old row out of the index),
+  then commits them in the segment (commit record, then the slot's write id): acknowledged
+  then, with no shard call on the path while the stock of reserved slots lasts (the next
+  ones are asked for ahead, not waited for). The shard indexes committed slots on its next
+  read; a shard killed and restarted by Ray re-attaches the segment and indexes them too,
+  so it loses no acknowledged sequence. Uncommitted reservations (a killed collector) are
+  holes, never indexed. A sample takes draws from the same pools as redis (below), then
+  gathers the rows itself with numpy from the mapped segments, checking each slot's stamp
+  and generation before and after the copy (a seqlock: a row rewritten meanwhile is drawn
+  again, counted as `stale_reads`).
+- memory backend through actor calls (`replay.shm` off, a client on another node than the
+  shard, or no shared memory there): a collector's complete windows travel as one
+  `SequenceBatch` in one batched actor call per destination shard (Ray's object store
+  carries the numpy buffers); the shard copies them once into its ring arrays. A sample is
+  one call per shard returning the gathered rows `[k, T, ...]`.
 - redis backend: bytes never go through Ray, and neither a shard nor any Ray call sits on
   the insert path or (most of the time) the sample path. An insert is one pipeline from the
   client, no transaction: the records (msgpack, encoded through a precomputed
@@ -32,10 +48,11 @@ Where the bytes go (a Ray actor call costs ~1-5 ms and copies what it carries):
   counts gate nothing and are summed and sent without waiting at most every 50 ms
   (`coalesce.Coalescer`, on the caller's own thread: no timer thread calls into Ray), and
   always before a blocking limiter call; stats, a checkpoint, close and a copy's first
-  count wait until the limiter applied them (a threaded actor may reorder calls). Memory: one `mass` call per
-  shard when S > 1 (redis: the pools carry each shard's size and mass) to split B by size
-  or priority mass. Write-backs go through the shard (stamp check, then a patch of the
-  stored record), one call per shard.
+  count wait until the limiter applied them (a threaded actor may reorder calls). Memory by
+  actor calls: one `mass` call per shard when S > 1 (the pools carry each shard's size and
+  mass) to split B by size or priority mass. Write-backs go through the shard (stamp check,
+  then a patch of the stored record, inside the slot's generation bracket in shared
+  memory), one call per shard.
 The shard actors are the only writers of their index, so stamp checks and eviction stay
 consistent without redis-side locking; record keys are never reused, so a reader holding a
 stale key gets the old record or nothing, never another sequence.

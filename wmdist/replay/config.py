@@ -10,6 +10,10 @@ from wmdist.config.fields import param
 class ReplayConfig:
     backend: str = param(
         "memory", "where sequences are stored: in the shard processes or in redis-server", choices=("memory", "redis"))
+    shm: bool = param(
+        True, "memory backend: shards keep rows in shared memory, where collectors, learner and reanalyzers on "
+              "their node write and read them without an actor call carrying the bytes (a killed shard re-attaches "
+              "them); off, or for a process on another node, rows travel through actor calls")
     shards: int = param(1, "number of replay shard actors (episodes are hashed onto them)", ge=1, le=256)
     capacity_steps: int = param(
         1_000_000, "total stored steps over all shards (T per sequence slot); FIFO eviction", ge=1)

@@ -192,20 +192,25 @@ class ReplayShard:
         if n == 0:
             return 0
         ids = self.count + np.arange(n, dtype=np.int64)  # write ids = stamps
-        slots = ids % self.capacity  # FIFO ring: the oldest sequence is evicted first
+        slots = self._slots_for(ids)
         evicted = int((self.stamp[slots] >= 0).sum())
         prio = np.full(n, self.max_priority)  # new items at the current max priority
         meta = {"stamp": ids, "version": version, "episode": episode, "steps": steps, "priority": prio}
         write(slots, meta)  # durable before the index sees it (raises: nothing changed)
         self.counters["drops_evicted"] += evicted
-        self.stamp[slots], self.version[slots], self.episode[slots] = ids, version, episode
+        self.version[slots], self.episode[slots] = version, episode
         self.steps[slots], self.priority[slots] = steps, prio
         self.born[slots] = self.clock + np.cumsum(steps) - steps  # windows in write order
+        self.stamp[slots] = ids  # last: a slot is live only with all its metadata (shm outlives a crash)
         self.clock += int(steps.sum())
         self.tree.set(slots, self._mass(prio))
         self.count += n
         self.counters["inserts"] += n
         return int(steps.sum())
+
+    def _slots_for(self, ids: np.ndarray) -> np.ndarray:
+        """Slots of new write ids: a FIFO ring, so the oldest sequence is evicted first."""
+        return ids % self.capacity
 
     # -- sample -------------------------------------------------------------------------
     def mass(self) -> tuple[int, float, int]:
@@ -342,12 +347,15 @@ class ReplayShard:
             arrays = {"i_" + k: getattr(self, k) for k in self._INDEX}
             if not self.storage.durable:
                 arrays.update(self.storage.arrays())
-            scalars = {"count": self.count, "max_priority": self.max_priority, "counters": self.counters,
+            scalars = {"count": self._saved_count(), "max_priority": self.max_priority, "counters": self.counters,
                        "capacity": self.capacity, "seq_len": self.T}
             arrays["scalars"] = np.frombuffer(json.dumps(scalars).encode(), dtype=np.uint8)
             tmp = path + ".tmp.npz"
             np.savez(tmp, **arrays)
             os.replace(tmp, path)
+
+    def _saved_count(self) -> int:
+        return self.count
 
     def restore(self, path: str) -> None:
         """Load what `save` wrote (never unpickles). Durable storage re-reads redis instead."""

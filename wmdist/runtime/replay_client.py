@@ -12,6 +12,7 @@ reachable server in `replay.redis_url` with `replay.redis_password_file` on ever
 Stats keys (`stats()`), all floats:
   `size_steps`, `size_sequences`, `capacity_sequences`, `inserts`, `samples`, `bytes` (memory
   backend: ring arrays + index; redis: index only) -- summed over shards;
+  `stale_reads` (shared memory only: rows a reader found rewritten after its draw, drawn again);
   (`samples` includes unlimited reanalyzer draws; the limiter's own counts do not);
   `drops_<reason>` summed, reason in stale_writeback, stale_priority, evicted, corrupt,
   policy_lag, unacked; the same keys per shard as `shard<i>_<key>`;
@@ -23,6 +24,7 @@ from __future__ import annotations
 
 import json
 import os
+import secrets
 import threading
 
 import numpy as np
@@ -44,7 +46,10 @@ from wmdist.replay.storage_redis import (
     new_keys,
     pending_entry,
 )
+from wmdist.replay.shm import drop as drop_segment
+from wmdist.replay.shm import keep_with_process, segment_prefix, sweep
 from wmdist.runtime.calls import LocalHandle, get, kill
+from wmdist.runtime.replay_shm import ShmPath, StaleSegment, node_id
 
 
 def route(source_id: int, episode_id: np.ndarray, shards: int) -> np.ndarray:
@@ -65,7 +70,8 @@ MAX_DRAW_AGE = 1.0  # seconds: older draws are dropped, so a slow reader sees fr
 
 class ReplayClient:
     def __init__(self, cfg: ReplayConfig, fields: dict[str, FieldSpec], shards: list, limiter, server=None,
-                 redis_url: str = "", password_file: str = "", namespaces: list[str] | None = None) -> None:
+                 redis_url: str = "", password_file: str = "", namespaces: list[str] | None = None,
+                 segments: list[str] | None = None) -> None:
         self.cfg, self.fields = cfg, dict(fields)
         self.shards, self.limiter = list(shards), limiter
         self._server = server  # private redis-server (owner only)
@@ -88,17 +94,40 @@ class ReplayClient:
         self._layout = None  # the fields' RecordLayout (redis), built on first use
         self._draw_lock: threading.Lock | None = None
         self._batches = 0  # rate-limited (learner) batches this copy sampled: anneals beta
+        # memory backend: the shards' shared-memory segments, mapped in the process that uses
+        # them (`replay_shm.ShmPath`); None where they are out of reach (rows go by actor call)
+        self._shm: ShmPath | None = None
+        self._shm_tried = False
+        self._segments = list(segments or [])  # owner: segment names its resource tracker holds
 
     def __getstate__(self) -> dict:
         state = dict(self.__dict__)
         state.update(_server=None, _owner=False, _rng=None, _redis=None, _warm=False, _samples=None,
-                     _draws=None, _draw_lock=None, _layout=None, _inserts=None)
+                     _draws=None, _draw_lock=None, _layout=None, _inserts=None, _shm=None, _shm_tried=False,
+                     _segments=[])
         return state
 
     @property
     def direct(self) -> bool:
         """Redis backend: this client moves record bytes to and from redis itself."""
         return self.cfg.backend == "redis"
+
+    def _shm_path(self) -> ShmPath | None:
+        """This process's mapping of the shards' segments (memory backend with `shm` on and
+        every shard on this node), made on first use; None: rows go through actor calls."""
+        if self._shm is not None and self._shm.broken:  # a shard recreated its segment: map again
+            self._drop_shm()
+        if self._shm is None and not self._shm_tried and self.cfg.backend == "memory" and self.cfg.shm:
+            self._shm_tried = True
+            self._shm = ShmPath.connect(self.shards, self.fields, self.cfg.seq_len, self._capacity)
+        return self._shm
+
+    def _drop_shm(self) -> None:
+        if self._shm is not None:
+            self._shm.close()
+        self._shm, self._shm_tried = None, False
+        if self._draws is not None:
+            self._draws.clear()
 
     @property
     def redis(self):
@@ -136,6 +165,12 @@ class ReplayClient:
         if self.direct:
             steps = self._insert_direct(batch, dest, min_version)
             self._gen += 1  # the next sample draws afresh, so it sees these
+        elif self._shm_path() is not None:  # rows into shared memory; no shard call on the way, mostly
+            if self._shm.closed:
+                return False  # the service was shut down
+            keep = np.ones(n, bool) if min_version is None else batch.version >= min_version
+            steps = self._shm.insert(batch, dest, keep, batch.mask.sum(axis=1).astype(np.int64))
+            self._gen += 1
         else:  # one batched call per shard; Ray carries the arrays
             targets = np.unique(dest)
             steps = sum(get([self.shards[s].insert.remote(
@@ -197,13 +232,21 @@ class ReplayClient:
                 if not get(self.limiter.acquire_sample.remote(batch_size, timeout)):
                     return None
                 self._warm = self.cfg.samples_per_insert == 0
-            if (not limited and not self.direct
+            drawn = self.direct or self._shm_path() is not None  # draw pools, then the client reads
+            if (not limited and not drawn
                     and sum(m[0] for m in get([s.mass.remote() for s in self.shards])) == 0):
                 return None
         except RayActorError:
             return None
         try:
-            return self._sample_direct(batch_size, limited) if self.direct else self._sample(batch_size)
+            if self.direct:
+                return self._sample_drawn(batch_size, limited, self._fetch_direct)
+            if drawn:
+                try:
+                    return self._sample_drawn(batch_size, limited, self._fetch_shm)
+                except StaleSegment:  # a shard recreated its segment: this once by call, then map again
+                    self._drop_shm()
+            return self._sample(batch_size)
         except RayActorError:
             return None  # the service was shut down
         finally:
@@ -257,9 +300,9 @@ class ReplayClient:
         b0, span = self.cfg.priority_beta, self.cfg.priority_beta_anneal_samples
         return b0 if span <= 0 else b0 + (1.0 - b0) * min(1.0, self._batches / span)
 
-    def _sample_direct(self, batch_size: int, limited: bool) -> Sample | None:
-        """Redis backend: draws from the pools (no shard round trip when the prefetched draws
-        are back), then one MGET of the records."""
+    def _sample_drawn(self, batch_size: int, limited: bool, fetch) -> Sample | None:
+        """Redis backend and shared memory: draws from the pools (no shard round trip when the
+        prefetched draws are back), then `fetch` reads the rows (one MGET / numpy gathers)."""
         if self._draw_lock is None:
             self._draw_lock = threading.Lock()
         with self._draw_lock:
@@ -270,7 +313,7 @@ class ReplayClient:
                 raise ValueError("replay is empty (min_size 0 and nothing inserted)")
             shard_of, slots, stamps, mass, keys, n, total, newer = got
             w = is_weights(mass, n, total, self._beta)
-            data, mask = self._fetch_direct(keys, shard_of, slots, stamps, w, n, total, newer)
+            data, mask = fetch(keys, shard_of, slots, stamps, w, n, total, newer)
         return Sample(data=data, mask=mask.astype(np.float32),
                       is_weight=(w / w.max()).astype(np.float32),  # normalised by the batch max
                       keys=make_keys(shard_of, slots), stamps=stamps,
@@ -318,6 +361,23 @@ class ReplayClient:
                 again.append(rows[np.union1d(miss2, corr2)])
             redo = np.concatenate(again)
         raise RuntimeError("replay: could not read a batch from redis after 100 redraws")
+
+    def _fetch_shm(self, keys, shard_of, slots, stamps, w, n, total, newer):
+        """Numpy gathers from the mapped segments; a row rewritten since its draw (evicted,
+        or written meanwhile) is drawn again from its shard, which counts it (`stale_reads`)."""
+        path = self._shm
+
+        def redraw(s: int, rows: np.ndarray) -> None:
+            g = get(self.shards[s].draw.remote(rows.size, rows.size))
+            if g.get("seg") != path.segs[s].token:
+                path.broken = True
+                raise StaleSegment(f"replay shard {s} serves another shared-memory segment")
+            if len(g["slots"]) < rows.size:
+                raise ValueError(f"replay shard {s} is empty")
+            slots[rows], stamps[rows], newer[rows] = g["slots"], g["stamps"], g["newer"]
+            w[rows] = is_weights(g["mass"], n, total, self._beta)
+
+        return path.gather(self.fields, self.cfg.seq_len, shard_of, slots, stamps, redraw)
 
     # -- write-back ---------------------------------------------------------------------
     def _by_shard(self, keys: np.ndarray, stamps: np.ndarray):
@@ -416,6 +476,9 @@ class ReplayClient:
             pass
         if self._redis is not None:
             self._redis.close()
+        if self._shm is not None:
+            self._shm.close()
+            self._shm = None
         if not self._owner:
             return
         try:
@@ -428,6 +491,8 @@ class ReplayClient:
             pass
         for a in [*self.shards, self.limiter]:
             kill(a)
+        for name in self._segments:  # unlinked by their shard's close; if that did not run, here
+            drop_segment(name)
         if self._server is not None:
             self._server.stop()
             self._server = None
@@ -478,10 +543,15 @@ def create_replay(cfg: ReplayConfig, fields: dict[str, FieldSpec], run_dir: str,
                                  die_with_parent=threading.current_thread() is threading.main_thread()).start()
             url, pwfile = server.url, server.password_file
     namespaces = [f"wmdist:{run_name}:s{i}" for i in range(cfg.shards)]
+    shm = cfg.backend == "memory" and cfg.shm and not local
+    segments = [f"{segment_prefix(run_name, run_dir)}s{i}" if shm else "" for i in range(cfg.shards)]
+    token = secrets.randbits(62)  # this service's: a restarted shard re-attaches only its own segment
+    if shm:
+        sweep(segment_prefix(run_name, run_dir))  # left by an earlier start of this run (on this node)
     roles = by_name(BUILTIN)
     shard_role, limiter_role = roles["replay"], roles["limiter"]
     shard_args = [(fields, cfg.seq_len, cap, cfg.sampler, cfg.priority_alpha, i, cfg.seed + i,
-                   cfg.backend, url, pwfile, namespaces[i]) for i in range(cfg.shards)]
+                   cfg.backend, url, pwfile, namespaces[i], segments[i], token) for i in range(cfg.shards)]
     limiter_args = (cfg.samples_per_insert, cfg.min_size, cfg.error_buffer)
     try:
         if local:
@@ -496,7 +566,13 @@ def create_replay(cfg: ReplayConfig, fields: dict[str, FieldSpec], run_dir: str,
             server.stop()
         raise
     get(limiter.set_size.remote(sum(m[2] for m in sizes)))
-    return ReplayClient(cfg, fields, shards, limiter, server, url, pwfile, namespaces)
+    kept = []
+    if shm:  # segments on this node die with this process, whatever kills it (its resource tracker)
+        here = node_id()
+        kept = [i["name"] for i in get([s.shm_info.remote() for s in shards]) if i and i["node"] == here]
+        for name in kept:
+            keep_with_process(name)
+    return ReplayClient(cfg, fields, shards, limiter, server, url, pwfile, namespaces, kept)
 
 
 def _remote(role, section: ReplayConfig):

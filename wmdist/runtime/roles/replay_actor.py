@@ -2,7 +2,12 @@
 
 `ShardActor` holds one `ReplayShard` (threaded: a blocking call never stalls the others);
 with the redis backend it rebuilds its index from redis in `__init__`, so a Ray restart
-(`max_restarts`) after the process died brings back every acknowledged sequence.
+(`max_restarts`) after the process died brings back every acknowledged sequence. The
+memory backend keeps everything in a shared-memory segment (`ShmShard`) when it can, which
+a restarted actor re-attaches by name to the same effect; clients on its node read and
+write rows there themselves (`shm_info`, `reserve`; see `wmdist/replay/shard_shm.py`).
+Without shared memory (`replay.shm` off, or none on the node) rows live in the actor and
+travel through its calls.
 With redis the shard only indexes: clients write the record bytes and a pending entry
 themselves and read them back by key (`draw`); a background thread drains the pending
 entries every `DRAIN_SECONDS` (every read drains too), so eviction keeps up even while
@@ -21,6 +26,8 @@ from wmdist.algos.base import FieldSpec
 from wmdist.replay.batch import SequenceBatch
 from wmdist.replay.limiter import RateLimiter
 from wmdist.replay.shard import ReplayShard
+from wmdist.replay.shard_shm import ShmShard
+from wmdist.replay.shm import ShmSegment, ShmUnavailable
 from wmdist.replay.storage_memory import MemoryStorage
 
 DRAIN_SECONDS = 0.2
@@ -29,14 +36,23 @@ DRAIN_SECONDS = 0.2
 class ShardActor:
     def __init__(self, fields: dict[str, FieldSpec], seq_len: int, capacity: int, sampler: str, alpha: float,
                  shard_id: int, seed: int, backend: str, redis_url: str = "", password_file: str = "",
-                 namespace: str = "") -> None:
-        if backend == "redis":
-            from wmdist.replay.storage_redis import RedisStorage, connect
-
-            storage = RedisStorage(fields, capacity, seq_len, connect(redis_url, password_file), namespace)
+                 namespace: str = "", shm_name: str = "", shm_token: int = 0) -> None:
+        segment = None
+        if backend == "memory" and shm_name:
+            try:
+                segment = ShmSegment.open(shm_name, fields, capacity, seq_len, shm_token)
+            except (OSError, ShmUnavailable):
+                segment = None  # no shared memory here: rows stay in this process
+        if segment is not None:
+            self.shard: ReplayShard = ShmShard(fields, seq_len, capacity, segment, sampler, alpha, seed, shard_id)
         else:
-            storage = MemoryStorage(fields, capacity, seq_len)
-        self.shard = ReplayShard(fields, seq_len, capacity, sampler, alpha, storage, seed, shard_id)
+            if backend == "redis":
+                from wmdist.replay.storage_redis import RedisStorage, connect
+
+                storage = RedisStorage(fields, capacity, seq_len, connect(redis_url, password_file), namespace)
+            else:
+                storage = MemoryStorage(fields, capacity, seq_len)
+            self.shard = ReplayShard(fields, seq_len, capacity, sampler, alpha, storage, seed, shard_id)
         self._stop = threading.Event()
         if backend == "redis":
             threading.Thread(target=self._drain_loop, name="drain", daemon=True).start()
@@ -54,8 +70,22 @@ class ShardActor:
     def insert(self, batch: SequenceBatch, min_version: int | None) -> int:
         return self.shard.insert(batch, min_version)
 
-    def draw(self, k: int) -> dict:
-        return self.shard.draw(k)
+    def draw(self, k: int, stale: int = 0) -> dict:
+        return self.shard.draw(k, stale) if stale else self.shard.draw(k)
+
+    def shm_info(self) -> dict | None:
+        """{"name", "token", "capacity", "seq_len", "node"} of the shard's segment, or None."""
+        if not isinstance(self.shard, ShmShard):
+            return None
+        import ray
+
+        return {**self.shard.shm_info(), "node": ray.get_runtime_context().get_node_id()}
+
+    def reserve(self, k: int) -> dict:
+        return self.shard.reserve(k)
+
+    def count_lag(self, n: int) -> None:
+        self.shard.count_lag(n)
 
     def drop_corrupt(self, slots: np.ndarray, stamps: np.ndarray) -> int:
         return self.shard.drop_corrupt(slots, stamps)
