@@ -346,7 +346,11 @@ class ReplayShard:
         with self.lock:
             arrays = {"i_" + k: getattr(self, k) for k in self._INDEX}
             if not self.storage.durable:
-                arrays.update(self.storage.arrays())
+                # rows from the last live slot on were never written (the ring fills from slot 0): a
+                # young run's checkpoint holds what it stored, not the zeros of a 100k-step buffer
+                live = np.flatnonzero(self.stamp >= 0)
+                n = int(live[-1]) + 1 if live.size else 0
+                arrays.update({k: a[:n] for k, a in self.storage.arrays().items()})  # views: no copy
             scalars = {"count": self._saved_count(), "max_priority": self.max_priority, "counters": self.counters,
                        "capacity": self.capacity, "seq_len": self.T}
             arrays["scalars"] = np.frombuffer(json.dumps(scalars).encode(), dtype=np.uint8)

@@ -50,13 +50,16 @@ class MemoryStorage:
         return {**{"f_" + k: a for k, a in self.data.items()}, "mask": self.mask}
 
     def load_arrays(self, arrays: dict[str, np.ndarray]) -> None:
+        """Load checkpointed rows: each array holds the first n <= capacity slots (older
+        checkpoints: all of them); the slots after them are left as they are (not live)."""
         for name, dst in self.arrays().items():
             if name not in arrays:
                 raise ValueError(f"replay checkpoint is missing array '{name}'")
             src = arrays[name]
-            if src.shape != dst.shape or src.dtype != dst.dtype:
-                raise ValueError(f"replay checkpoint array '{name}' is {src.dtype}{src.shape}, expected {dst.dtype}{dst.shape}")
-            dst[...] = src
+            if src.shape[1:] != dst.shape[1:] or len(src) > len(dst) or src.dtype != dst.dtype:
+                raise ValueError(f"replay checkpoint array '{name}' is {src.dtype}{src.shape}, expected {dst.dtype}"
+                                 f"[<={dst.shape[0]}, {', '.join(map(str, dst.shape[1:]))}]")
+            dst[:len(src)] = src  # the rest is never read: no live index entry names it
 
     def close(self) -> None:
         pass
