@@ -22,13 +22,20 @@ FAKE = str(Path(__file__).parent / "fake.yaml")
 ROOT = Path(__file__).resolve().parents[2]
 
 
+def _terminal_signals() -> None:
+    """In the child before exec: SIGINT as a terminal's foreground job has it. A suite started as
+    a background job (`cmd &` in a script) inherits SIGINT ignored, and Python then installs no
+    KeyboardInterrupt handler, so the Ctrl-C these tests send would be lost."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 class Train:
     """`wmdist train ...` in a new session, its output collected on a thread."""
 
     def __init__(self, *args: str) -> None:
         self.proc = subprocess.Popen([sys.executable, "-m", "wmdist.cli", "train", *args], cwd=ROOT,
                                      stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-                                     start_new_session=True)
+                                     start_new_session=True, preexec_fn=_terminal_signals)
         self.lines: list[str] = []
         self.reader = threading.Thread(target=self._read, daemon=True)
         self.reader.start()
