@@ -1,4 +1,5 @@
-"""Replay test fixtures: a real redis-server (password, 127.0.0.1, free port)."""
+"""Replay test fixtures: a real redis-server (password, 127.0.0.1, free port), and replay
+services on the session's real local Ray (`started`), closed after the test."""
 from __future__ import annotations
 
 import itertools
@@ -6,6 +7,9 @@ import itertools
 import pytest
 import torch
 
+from replay_helpers import FIELDS
+
+from wmdist.replay.config import ReplayConfig
 from wmdist.replay.redis_server import RedisServer
 
 torch.set_num_threads(1)
@@ -47,3 +51,20 @@ def make_shard(backend, request):
         return ReplayShard(FIELDS, T, capacity, sampler, alpha, storage, seed)
 
     return make
+
+
+@pytest.fixture
+def started(ray_session, tmp_path):
+    """`start(cfg, name)` -> a replay service (shards, limiter, client) of FIELDS in tmp_path."""
+    from wmdist.runtime.replay_client import ReplayClient, create_replay
+
+    clients: list[ReplayClient] = []
+
+    def start(cfg: ReplayConfig, name: str = "t") -> ReplayClient:
+        c = create_replay(cfg, FIELDS, str(tmp_path), name)
+        clients.append(c)
+        return c
+
+    yield start
+    for c in clients:
+        c.close()

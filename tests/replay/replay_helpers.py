@@ -1,6 +1,8 @@
 """Shared helpers of the replay tests: small fields and batches with recognisable contents."""
 from __future__ import annotations
 
+import time
+
 import numpy as np
 
 from wmdist.algos.base import FieldSpec
@@ -37,3 +39,24 @@ def make_batch(n: int, seq_len: int = T, start: int = 0, steps: np.ndarray | Non
         "root_value": np.zeros((n, seq_len), np.float32),
     }
     return SequenceBatch(data, mask, ids.astype(np.int64), ids.astype(np.int64))
+
+
+def sample_ids(sample) -> np.ndarray:
+    """[B] the sequence id each sampled row encodes (see `make_batch`)."""
+    return sample.data["obs"][:, 0, 0].astype(int)
+
+
+def wait_shard_restarted(client, pid: int, shard: int = 0) -> None:
+    """Until Ray has restarted `client`'s shard (a new process id), at most 60 s; its __init__
+    rebuilds the index (from redis, or by re-attaching the shared-memory segment)."""
+    import ray
+
+    deadline = time.monotonic() + 60
+    while True:
+        try:
+            if ray.get(client.shards[shard].pid.remote(), timeout=10) != pid:
+                return
+        except Exception:  # noqa: BLE001 - the actor is still coming back
+            pass
+        assert time.monotonic() < deadline, "shard did not come back"
+        time.sleep(0.2)

@@ -13,35 +13,16 @@ import numpy as np
 import pytest
 import ray
 import redis
-from replay_helpers import FIELDS, T, make_batch
+from replay_helpers import T, make_batch, sample_ids, wait_shard_restarted
 from scipy.stats import chisquare
 
 from wmdist.replay.config import ReplayConfig
 from wmdist.runtime import replay_client
-from wmdist.runtime.replay_client import ReplayClient, create_replay
 
 
 def _cfg(**kw) -> ReplayConfig:
     base = dict(shards=2, capacity_steps=64 * T, seq_len=T, min_size=0, shard_cpus=0.1, error_buffer=1000)
     return ReplayConfig(**{**base, **kw})
-
-
-def _ids(sample) -> np.ndarray:
-    return sample.data["obs"][:, 0, 0].astype(int)
-
-
-@pytest.fixture
-def started(ray_session, tmp_path):
-    clients: list[ReplayClient] = []
-
-    def start(cfg: ReplayConfig, name: str = "t") -> ReplayClient:
-        c = create_replay(cfg, FIELDS, str(tmp_path), name)
-        clients.append(c)
-        return c
-
-    yield start
-    for c in clients:
-        c.close()
 
 
 @pytest.mark.parametrize("backend", ["memory", "redis"])
@@ -53,23 +34,23 @@ def test_two_shards_sample_as_one_buffer(started, backend):
     st = c.stats()
     assert st["size_sequences"] == 20 and min(st["shard0_size_sequences"], st["shard1_size_sequences"]) > 0
     # uniform at first (all at max priority): every sequence equally likely across both shards
-    ids = np.concatenate([_ids(c.sample(500)) for _ in range(8)])
+    ids = np.concatenate([sample_ids(c.sample(500)) for _ in range(8)])
     assert chisquare(np.bincount(ids, minlength=20)).pvalue > 1e-3
     # priorities p_i = i + 1 written back by key: frequencies and IS weights follow the union
     seen = {}
     for _ in range(10):  # collect (key, stamp) of every sequence from what sampling returns
         s = c.sample(100)
-        seen.update({i: (k, st_) for k, st_, i in zip(s.keys, s.stamps, _ids(s))})
+        seen.update({i: (k, st_) for k, st_, i in zip(s.keys, s.stamps, sample_ids(s))})
     assert len(seen) == 20
     keys = np.array([seen[i][0] for i in range(20)])
     stamps = np.array([seen[i][1] for i in range(20)])
     assert c.update_priorities(keys, stamps, np.arange(1, 21, dtype=float)) == 20
     samples = [c.sample(500) for _ in range(8)]
-    ids = np.concatenate([_ids(x) for x in samples])
+    ids = np.concatenate([sample_ids(x) for x in samples])
     P = np.arange(1, 21) / np.arange(1, 21).sum()
     assert chisquare(np.bincount(ids, minlength=20), P * ids.size).pvalue > 1e-3
     x = samples[0]
-    w = (20 * P[_ids(x)]) ** -0.5
+    w = (20 * P[sample_ids(x)]) ** -0.5
     assert np.allclose(x.is_weight, w / w.max(), rtol=1e-5)
 
 
@@ -150,18 +131,6 @@ def test_policy_lag_and_bad_input(started):
         c.insert(bad, source_id=0)
 
 
-def _wait_restarted(c: ReplayClient, pid: int) -> None:
-    deadline = time.monotonic() + 60
-    while True:  # Ray restarts the actor; its __init__ rebuilds the index from redis
-        try:
-            if ray.get(c.shards[0].pid.remote(), timeout=10) != pid:
-                return
-        except Exception:
-            pass
-        assert time.monotonic() < deadline, "shard did not come back"
-        time.sleep(0.2)
-
-
 def test_private_redis_and_shard_sigkill(started, tmp_path):
     c = started(_cfg(backend="redis", redis_appendfsync="always", sampler="prioritized"), name="dur")
     server = c._server
@@ -181,11 +150,11 @@ def test_private_redis_and_shard_sigkill(started, tmp_path):
     server.start()
     pid = ray.get(c.shards[0].pid.remote())
     os.kill(pid, signal.SIGKILL)
-    _wait_restarted(c, pid)
+    wait_shard_restarted(c, pid)
     after = c.stats()
     for k in ("size_sequences", "size_steps", "shard0_size_sequences", "shard1_size_sequences"):
         assert after[k] == before[k], k
-    ids = np.concatenate([_ids(c.sample(64)) for _ in range(3)])
+    ids = np.concatenate([sample_ids(c.sample(64)) for _ in range(3)])
     assert set(ids) == set(range(12))  # every acknowledged sequence is served again
     # records broken or lost behind the service's back: redrawn, dropped and counted
     r = server.client()
@@ -208,10 +177,10 @@ def test_redis_inserts_need_no_shard_and_survive_its_restart(started):
     os.kill(pid, signal.SIGKILL)
     # acknowledged by redis alone while the shard is dead or rebuilding: nothing waits for it
     assert c.insert(make_batch(3, start=3), source_id=1)
-    _wait_restarted(c, pid)
+    wait_shard_restarted(c, pid)
     st = c.stats()
     assert st["size_sequences"] == 6 and st["drops_unacked"] == 0 and st["limiter_size_steps"] == 6 * T
-    assert set(_ids(c.sample(300))) == set(range(6))
+    assert set(sample_ids(c.sample(300))) == set(range(6))
     with pytest.raises(ValueError, match="no real step"):  # refused before anything is written
         c.insert(make_batch(1, start=9, steps=np.array([0])), source_id=2)
 
@@ -238,7 +207,7 @@ def test_redis_insert_swept_before_its_announcement_is_written_again(started, mo
     assert c.insert(make_batch(4), source_id=0)
     st = c.stats()
     assert refused and st["size_sequences"] == 4 and st["drops_corrupt"] == 0
-    assert set(_ids(c.sample(200))) == set(range(4))
+    assert set(sample_ids(c.sample(200))) == set(range(4))
     left = [k.decode() for k in c.redis.scan_iter(match=f"{c._namespaces[0]}:r:*")]
     assert len(left) == 4 and not set(left) & set(refused[0])  # the first attempt left nothing
 
@@ -249,16 +218,16 @@ def test_redis_sample_sees_own_writes_and_redraws_stale_draws(started, monkeypat
     other = pickle.loads(pickle.dumps(c))  # another process's client
     assert c.insert(make_batch(6), source_id=0)
     for _ in range(3):  # stocks the draw pools (draws for later calls in flight)
-        assert set(_ids(c.sample(8))) <= set(range(6))
+        assert set(sample_ids(c.sample(8))) <= set(range(6))
     assert c.insert(make_batch(6, start=6), source_id=1)  # this copy's write: its next sample sees it
-    assert set(_ids(c.sample(300))) == set(range(12))
+    assert set(sample_ids(c.sample(300))) == set(range(12))
     old = c.sample(8)
     c.sample(8)
     for i in range(4):  # another copy evicts every sequence c's pooled draws point at
         assert other.insert(make_batch(16, start=100 + 16 * i), source_id=7 + i)
     assert other.stats()["size_sequences"] == 24  # a read: the shards have indexed (and evicted) by now
     x = c.sample(64)  # pooled draws name evicted records: drawn again, not counted as corrupt
-    assert set(_ids(x)) <= set(range(100, 164)) and np.all(x.data["obs"][:, :, 1] == np.arange(T))
+    assert set(sample_ids(x)) <= set(range(100, 164)) and np.all(x.data["obs"][:, :, 1] == np.arange(T))
     st = c.stats()
     assert st["drops_corrupt"] == 0 and st["size_sequences"] == 24
     assert c.update_priorities(old.keys, old.stamps, np.ones(8)) == 0  # stamps still catch stale write-backs
@@ -276,13 +245,13 @@ def test_samples_carry_each_steps_age_and_beta_anneals(started, backend):
     order = [(i, t) for i, n in enumerate(steps) for t in range(n)]  # storage order
     want = {(i, t): len(order) - 1 - k for k, (i, t) in enumerate(order)}
     s = c.sample(64, limited=False)
-    for row, i in enumerate(_ids(s)):
+    for row, i in enumerate(sample_ids(s)):
         assert s.age[row, :steps[i]].tolist() == [want[(i, t)] for t in range(steps[i])]
-    keys = {i: (k, st) for k, st, i in zip(s.keys, s.stamps, _ids(s))}
+    keys = {i: (k, st) for k, st, i in zip(s.keys, s.stamps, sample_ids(s))}
     assert c.update_priorities(np.array([keys[i][0] for i in range(3)]), np.array([keys[i][1] for i in range(3)]),
                                np.array([1.0, 2.0, 4.0])) == 3
     assert np.allclose(c.sample(64).is_weight, 1.0)  # beta 0 at the first learner batch
     c.sample(64)
     x = c.sample(64)  # two batches done: beta = 1
-    w = (3 * np.array([1.0, 2.0, 4.0])[_ids(x)] / 7.0) ** -1.0
+    w = (3 * np.array([1.0, 2.0, 4.0])[sample_ids(x)] / 7.0) ** -1.0
     assert np.allclose(x.is_weight, w / w.max(), rtol=1e-5)

@@ -7,17 +7,15 @@ from __future__ import annotations
 import os
 import pickle
 import signal
-import time
 
 import numpy as np
 import pytest
 import ray
-from replay_helpers import FIELDS, T, make_batch
+from replay_helpers import FIELDS, T, make_batch, sample_ids, wait_shard_restarted
 
 from wmdist.replay.config import ReplayConfig
 from wmdist.replay.shm import SHM_DIR, ShmSegment, segment_prefix
 from wmdist.runtime import replay_shm
-from wmdist.runtime.replay_client import ReplayClient, create_replay
 
 
 def _cfg(**kw) -> ReplayConfig:
@@ -25,32 +23,14 @@ def _cfg(**kw) -> ReplayConfig:
     return ReplayConfig(**{**base, **kw})
 
 
-def _ids(sample) -> np.ndarray:
-    return sample.data["obs"][:, 0, 0].astype(int)
-
-
 def _segments(tmp_path, name: str) -> list[str]:
     prefix = segment_prefix(name, str(tmp_path))
     return sorted(n for n in os.listdir(SHM_DIR) if n.startswith(prefix))
 
 
-@pytest.fixture
-def started(ray_session, tmp_path):
-    clients: list[ReplayClient] = []
-
-    def start(cfg: ReplayConfig, name: str = "t") -> ReplayClient:
-        c = create_replay(cfg, FIELDS, str(tmp_path), name)
-        clients.append(c)
-        return c
-
-    yield start
-    for c in clients:
-        c.close()
-
-
 def _check_rows(sample, inserted: dict) -> None:
     """Every sampled row equals the inserted window with its id, field by field."""
-    for row, i in enumerate(_ids(sample)):
+    for row, i in enumerate(sample_ids(sample)):
         b, r = inserted[i]
         assert np.array_equal(sample.mask[row], b.mask[r].astype(np.float32))
         for f in FIELDS:
@@ -74,7 +54,7 @@ def test_shm_reads_return_exactly_the_inserted_arrays(started, tmp_path):
     for _ in range(5):
         s = c.sample(64)
         _check_rows(s, inserted)
-        seen |= set(_ids(s))
+        seen |= set(sample_ids(s))
     assert seen == set(range(20)) and c.stats()["stale_reads"] == 0
     assert _segments(tmp_path, "exact") == [prefix + "s0", prefix + "s1"]
     other = pickle.loads(pickle.dumps(c))  # another process's client maps the segments itself
@@ -102,22 +82,10 @@ def test_a_row_rewritten_during_the_read_is_drawn_again(started, monkeypatch):
 
     monkeypatch.setattr(replay_shm, "read_rows", read_then_overwrite)
     x = c.sample(8)
-    assert calls == [8] and set(_ids(x)) <= set(range(100, 140))
-    assert np.all(x.data["obs"][:, :, 1] == np.arange(T)) and np.all(x.data["action"] // 10 == _ids(x)[:, None])
+    assert calls == [8] and set(sample_ids(x)) <= set(range(100, 140))
+    assert np.all(x.data["obs"][:, :, 1] == np.arange(T)) and np.all(x.data["action"] // 10 == sample_ids(x)[:, None])
     assert c.stats()["stale_reads"] == 8
     other.close()
-
-
-def _wait_restarted(c: ReplayClient, pid: int) -> None:
-    deadline = time.monotonic() + 60
-    while True:  # Ray restarts the actor; its __init__ re-attaches the segment
-        try:
-            if ray.get(c.shards[0].pid.remote(), timeout=10) != pid:
-                return
-        except Exception:
-            pass
-        assert time.monotonic() < deadline, "shard did not come back"
-        time.sleep(0.2)
 
 
 def test_sigkilled_shard_keeps_every_acknowledged_sequence(started):
@@ -128,7 +96,7 @@ def test_sigkilled_shard_keeps_every_acknowledged_sequence(started):
         inserted.update({4 * src + r: (b, r) for r in range(4)})
         assert c.insert(b, source_id=src)
     s = c.sample(64)
-    keys = {i: (k, st) for k, st, i in zip(s.keys, s.stamps, _ids(s))}
+    keys = {i: (k, st) for k, st, i in zip(s.keys, s.stamps, sample_ids(s))}
     k = np.array([keys[i][0] for i in range(12)])
     st = np.array([keys[i][1] for i in range(12)])
     assert c.update_priorities(k, st, np.arange(12) + 1.0) == 12
@@ -144,15 +112,15 @@ def test_sigkilled_shard_keeps_every_acknowledged_sequence(started):
     inserted.update({20 + r: (b, r) for r in range(3)})
     pid = ray.get(c.shards[0].pid.remote())
     os.kill(pid, signal.SIGKILL)
-    _wait_restarted(c, pid)
+    wait_shard_restarted(c, pid)
     after = c.stats()
     assert after["size_sequences"] == before["size_sequences"] + 3 == 17
     assert after["inserts"] == 17 and after["drops_corrupt"] == 0
     x = c.sample(300)  # the same mapping serves the restarted shard
-    assert set(_ids(x)) == set(inserted)
+    assert set(sample_ids(x)) == set(inserted)
     inserted[0][0].data["root_value"][0] = 5.0  # the write-back survived too
     _check_rows(x, inserted)
-    w = {i: x.is_weight[r] for r, i in enumerate(_ids(x))}
+    w = {i: x.is_weight[r] for r, i in enumerate(sample_ids(x))}
     assert w[0] > w[11]  # priorities survived: rarer (lower priority) rows weigh more
     by_call.close()
 
@@ -177,7 +145,7 @@ def test_killed_collectors_uncommitted_rows_are_never_sampled(started, monkeypat
     assert c.insert(make_batch(2, start=4), source_id=2)
     st = c.stats()
     assert st["size_sequences"] == 6 and st["inserts"] == 6
-    assert set(_ids(c.sample(400))) == set(range(6))
+    assert set(sample_ids(c.sample(400))) == set(range(6))
 
 
 def test_write_backs_of_rewritten_rows_are_dropped_and_counted(started):
@@ -186,8 +154,8 @@ def test_write_backs_of_rewritten_rows_are_dropped_and_counted(started):
     s = c.sample(64)
     assert c.insert(make_batch(8, start=100), source_id=1)  # evicts the oldest (and reserves ahead)
     fields = {"root_value": np.full((64, T), 3.0, np.float32)}
-    live = {int(i) for i in _ids(c.sample(300))}
-    fresh = np.array([i in live for i in _ids(s)])
+    live = {int(i) for i in sample_ids(c.sample(300))}
+    fresh = np.array([i in live for i in sample_ids(s)])
     applied = c.write_back(s.keys, s.stamps, fields)
     assert applied == fresh.sum() and 0 < applied < 64
     st = c.stats()
@@ -195,8 +163,8 @@ def test_write_backs_of_rewritten_rows_are_dropped_and_counted(started):
     assert c.update_priorities(s.keys, s.stamps, np.ones(64)) == applied
     assert c.stats()["drops_stale_priority"] == 64 - applied
     x = c.sample(300)
-    written = set(_ids(s)[fresh])
-    for row, i in enumerate(_ids(x)):
+    written = set(sample_ids(s)[fresh])
+    for row, i in enumerate(sample_ids(x)):
         assert np.all(x.data["root_value"][row] == (3.0 if i in written else 0.0))
 
 
@@ -212,7 +180,7 @@ def test_actor_call_fallback(started, monkeypatch, why, tmp_path):
     assert c.insert(b, source_id=0)
     assert c._shm is None
     x = c.sample(200)
-    assert set(_ids(x)) == {3, 4, 5}
+    assert set(sample_ids(x)) == {3, 4, 5}
     _check_rows(x, {i: (b, i) for i in range(6)})
     assert c.write_back(x.keys[:1], x.stamps[:1], {"root_value": np.ones((1, T), np.float32)}) == 1
     st = c.stats()

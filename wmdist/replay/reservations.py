@@ -1,8 +1,8 @@
 """Reservations: one client's stock of slots reserved in one shared-memory shard.
 
-A commit asks for the next insert's slots (`ShmShard.commit(reserve=k)`), so an insert
-usually needs exactly one small shard call: the commit of the rows it just wrote. Slots are
-used oldest first and only while younger than `shard_shm.LEASE_USE_SECONDS` (counted from
+The client asks for slots ahead (`ShmShard.reserve`, not waited for), writes rows into
+them and commits them in the segment (`shm_rows.commit_rows`), so an insert needs no shard
+call while the stock lasts (`wmdist/runtime/replay_shm.py`). Slots are used oldest first and only while younger than `shard_shm.LEASE_USE_SECONDS` (counted from
 the request), well inside the lease after which the shard may hand them out again.
 """
 from __future__ import annotations

@@ -198,14 +198,20 @@ class ReplayShard:
         meta = {"stamp": ids, "version": version, "episode": episode, "steps": steps, "priority": prio}
         write(slots, meta)  # durable before the index sees it (raises: nothing changed)
         self.counters["drops_evicted"] += evicted
+        self.count += n
+        return self._index(slots, ids, version, episode, steps, prio)
+
+    def _index(self, slots: np.ndarray, ids: np.ndarray, version: np.ndarray, episode: np.ndarray,
+               steps: np.ndarray, prio: np.ndarray) -> int:
+        """Make stored rows `slots` [n] live under write ids `ids` [n] (in write order); returns
+        their real steps."""
         self.version[slots], self.episode[slots] = version, episode
         self.steps[slots], self.priority[slots] = steps, prio
         self.born[slots] = self.clock + np.cumsum(steps) - steps  # windows in write order
         self.stamp[slots] = ids  # last: a slot is live only with all its metadata (shm outlives a crash)
         self.clock += int(steps.sum())
         self.tree.set(slots, self._mass(prio))
-        self.count += n
-        self.counters["inserts"] += n
+        self.counters["inserts"] += len(slots)
         return int(steps.sum())
 
     def _slots_for(self, ids: np.ndarray) -> np.ndarray:

@@ -193,17 +193,11 @@ class ShmShard(ReplayShard):
                 self.counters["drops_corrupt"] += int(bad.sum())
                 self.lease[ready[bad]] = -1
                 ready, st = ready[~bad], st[~bad]
-            n = ready.size
-            prio = np.full(n, self.max_priority)  # new items at the current max priority
-            self.version[ready], self.episode[ready] = self.c_version[ready], self.c_episode[ready]
-            self.steps[ready], self.priority[ready] = st, prio
-            self.born[ready] = self.clock + np.cumsum(st) - st
-            self.stamp[ready] = self.lease[ready]  # now live (indexed once: `stamp != lease` above)
+            prio = np.full(ready.size, self.max_priority)  # new items at the current max priority
+            # live under the committed write id (indexed once: `stamp != lease` above)
+            stored = self._index(ready, self.lease[ready], self.c_version[ready], self.c_episode[ready], st, prio)
             self.lease[ready] = -1
-            self.clock += int(st.sum())
-            self.tree.set(ready, self._mass(prio))
-            self.counters["inserts"] += n
-            return int(st.sum())
+            return stored
 
     def count_lag(self, n: int) -> None:
         """Rows a client left out for `max_policy_lag` (counted here like the shard's own)."""

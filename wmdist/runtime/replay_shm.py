@@ -148,16 +148,18 @@ class ShmPath:
         mask = np.empty((B, seq_len), bool)
         # the draws come in one block per shard: each block is gathered in place
         edges = [0, *(np.flatnonzero(shard_of[1:] != shard_of[:-1]) + 1).tolist(), B]
-        bad = [self._read(int(shard_of[lo]), np.arange(lo, hi), slots, stamps, data, mask)
-               for lo, hi in zip(edges[:-1], edges[1:]) if hi > lo]
-        todo = np.concatenate(bad) if len(bad) > 1 else bad[0] if bad else np.zeros(0, np.int64)
+        todo = np.concatenate([np.zeros(0, np.int64)] + [
+            self._read(int(shard_of[lo]), np.arange(lo, hi), slots, stamps, data, mask)
+            for lo, hi in zip(edges[:-1], edges[1:]) if hi > lo])
         for _ in range(100):
             if todo.size == 0:
                 return data, mask
+            again = [np.zeros(0, np.int64)]
             for s in np.unique(shard_of[todo]):
-                redraw(int(s), todo[shard_of[todo] == s])
-            todo = np.concatenate([self._read(int(s), rows, slots, stamps, data, mask)
-                                   for s in np.unique(shard_of[todo]) for rows in [todo[shard_of[todo] == s]]])
+                rows = todo[shard_of[todo] == s]
+                redraw(int(s), rows)
+                again.append(self._read(int(s), rows, slots, stamps, data, mask))
+            todo = np.concatenate(again)
         raise RuntimeError("replay: rows kept changing under 100 reads (shards rewriting faster than reads)")
 
     def _read(self, s: int, rows: np.ndarray, slots: np.ndarray, stamps: np.ndarray, data: dict[str, np.ndarray],
