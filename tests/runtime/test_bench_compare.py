@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import json
 
-from wmdist.bench.compare import main
+from wmdist.bench.compare import curve, main
 
 
 def _run(folder, seed: int, evals: list[tuple[int, float]]) -> None:
@@ -33,3 +33,15 @@ def test_compare_reports_first_crossing_per_seed_and_group_means(tmp_path, capsy
 def test_compare_rejects_a_group_without_a_folder(tmp_path, capsys):
     assert main(["--target", "1", "--png", str(tmp_path / "x.png"), "nofolder"]) == 2
     assert "GROUP=DIR" in capsys.readouterr().err
+
+
+def test_compare_plots_return_against_wall_time(tmp_path, capsys):
+    records = [{"kind": "eval", "env_steps": 1000, "eval_return": 5.0, "time": 90.0},
+               {"kind": "eval", "env_steps": 3000, "eval_return": 9.0, "time": 300.0}]
+    assert curve(records, "minutes") == ([1.5, 5.0], [5.0, 9.0])
+    assert curve(records, "env_steps") == ([1000, 3000], [5.0, 9.0])
+    _run(tmp_path / "a", 0, [(1000, 100.0), (2000, 480.0)])
+    png = tmp_path / "t.png"
+    assert main(["--target", "475", "--x", "minutes", "--budget-minutes", "1", "--png", str(png),
+                 f"a={tmp_path / 'a'}"]) == 0
+    assert png.stat().st_size > 1000

@@ -8,7 +8,9 @@ Each GROUP=DIR names a `--runs-dir` of `wmdist.bench.learning` (run folders name
 `<config>-seed<N>-<time>`). Prints one JSON line per run and one per group: the first
 crossing and the sustained figures of `wmdist.bench.learning.sustained` (mean of the last
 three evals at the budget, `met`, `sustained_from_env_steps`). The plot draws every seed
-thinly and, per group, the seeds' mean curve with a min-max band on a common env-step grid.
+thinly and, per group, the seeds' mean curve with a min-max band on a common grid, against
+env steps or, with `--x minutes`, against wall-clock minutes (return against wall time: an
+agent that learns more per env step but runs slower per step is seen as such).
 """
 from __future__ import annotations
 
@@ -53,6 +55,16 @@ def band(curves: list[tuple[list[float], list[float]]]) -> tuple[list[float], li
             np.nanmax(vals, axis=0).tolist())
 
 
+X_AXES = {"env_steps": "env steps", "minutes": "wall-clock minutes"}
+
+
+def curve(records: list[dict], x_axis: str) -> tuple[list[float], list[float]]:
+    """(x, greedy return) of a run's eval records: x is env steps, or run time in minutes."""
+    if x_axis == "minutes":
+        return [r["time"] / 60.0 for r in records], [r["eval_return"] for r in records]
+    return [r["env_steps"] for r in records], [r["eval_return"] for r in records]
+
+
 def _mean(xs: list) -> float | None:
     xs = [x for x in xs if x is not None]
     return sum(xs) / len(xs) if xs else None
@@ -67,6 +79,8 @@ def main(argv: list[str] | None = None) -> int:
                    help="judge each run on its evals up to this many env steps (default: all)")
     p.add_argument("--budget-minutes", type=float, default=None,
                    help="judge each run on its evals up to this much run time (default: all)")
+    p.add_argument("--x", choices=sorted(X_AXES), default="env_steps",
+                   help="the plot's x axis: env steps (default) or wall-clock minutes")
     a = p.parse_args(argv)
     budget_seconds = a.budget_minutes * 60 if a.budget_minutes is not None else None
     import matplotlib
@@ -90,7 +104,7 @@ def main(argv: list[str] | None = None) -> int:
             print(json.dumps({"group": name, "seed": seed, "target": a.target, **res}), flush=True)
             results.append(res)
             ev = eval_records(jsonl)
-            curves.append(([r["env_steps"] for r in ev], [r["eval_return"] for r in ev]))
+            curves.append(curve(ev, a.x))
             ax.plot(*curves[-1], color=colour, linestyle=styles[si % len(styles)],
                     marker=markers[si // len(styles) % len(markers)], markersize=3, linewidth=0.8, alpha=0.35,
                     label=f"{name} seed {seed}")
@@ -112,9 +126,10 @@ def main(argv: list[str] | None = None) -> int:
                           "max_sustained_from_env_steps": max((x for x in sus if x is not None), default=None)}),
               flush=True)
     ax.axhline(a.target, color="grey", linestyle="--", linewidth=1)
-    if a.budget_env_steps is not None:
-        ax.axvline(a.budget_env_steps, color="grey", linestyle=":", linewidth=1)
-    ax.set_xlabel("env steps")
+    budget_x = a.budget_minutes if a.x == "minutes" else a.budget_env_steps
+    if budget_x is not None:
+        ax.axvline(budget_x, color="grey", linestyle=":", linewidth=1)
+    ax.set_xlabel(X_AXES[a.x])
     ax.set_ylabel("greedy eval return")
     ax.grid(alpha=0.3)
     ax.legend(fontsize=7)
