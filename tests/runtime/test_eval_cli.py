@@ -57,12 +57,15 @@ def test_board_bench_plays_the_solver_and_plots_losses(tmp_path, capsys):
     weights = build_algorithm(cfg, env_spec(cfg.env), 0).make_learner().get_weights()
     save_checkpoint(run_dir, {}, weights, 3, {"updates": 3, "env_steps": 90}, None, keep=2)
     (run_dir / "metrics.jsonl").write_text(
-        '{"kind": "eval", "env_steps": 40, "eval_return": -0.5, "eval_min": -1}\n'
-        '{"kind": "eval", "env_steps": 90, "eval_return": -0.1, "eval_min": -1}\n')
-    png = tmp_path / "lost.png"
-    assert board_main([str(run_dir), "--games", "6", "--png", str(png)]) == 0
+        '{"kind": "eval", "env_steps": 40, "eval_return": -0.5, "eval_min": -1, "time": 60}\n'
+        '{"kind": "eval", "env_steps": 90, "eval_return": -0.1, "eval_min": -1, "time": 120, '
+        '"eval_lost_lines": 3, "eval_lines": 500}\n')
+    png, lines_png = tmp_path / "lost.png", tmp_path / "lines.png"
+    assert board_main([str(run_dir), "--games", "6", "--png", str(png), "--lines-png", str(lines_png)]) == 0
     res = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
     assert res["games"] == 6 and res["won_p0"] == res["won_p1"] == 0  # nobody beats the solver
     assert sum(res[f"{k}_p{s}"] for k in ("won", "drew", "lost") for s in (0, 1)) == 6
     assert res["never_loses"] == (res["lost"] == 0)
-    assert png.stat().st_size > 1000
+    # every line judged too: an untrained net loses some, and the per-side counts add up
+    assert res["lost_lines"] == res["lost_lines_p0"] + res["lost_lines_p1"] > 0
+    assert png.stat().st_size > 1000 and lines_png.stat().st_size > 1000

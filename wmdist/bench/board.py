@@ -1,10 +1,13 @@
 """Board-game benchmark: a trained run's agent against the exact solver.
 
-    python -m wmdist.bench.board RUN_DIR --games 200 --png docs/bench/muzero_tictactoe.png
+    python -m wmdist.bench.board RUN_DIR --games 200 --png docs/bench/muzero_tictactoe.png \
+        --lines-png docs/bench/muzero_tictactoe_lines.png
 
 Plays `games` games with the run's latest checkpoint (half as first player, half as
-second; the solver picks a random optimal move, so games differ), prints one JSON line
-with the counts, and plots the games lost per in-training evaluation against env steps.
+second; the solver picks a random optimal move, so games differ), judges the checkpoint over
+every opponent line (tic-tac-toe), prints one JSON line with the counts, and plots the games
+lost per in-training evaluation against env steps and the lines lost per evaluation
+(`eval_lost_lines`) against wall-clock minutes.
 """
 from __future__ import annotations
 
@@ -38,14 +41,36 @@ def plot_losses(metrics: Path, games_per_eval: int, png: Path, title: str) -> No
     fig.savefig(png, dpi=90)
 
 
+def plot_lost_lines(metrics: Path, png: Path, title: str) -> int:
+    """Opponent lines lost per in-training evaluation against minutes; returns the points drawn."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    ev = [r for r in read_jsonl(metrics) if r.get("kind") == "eval" and r.get("eval_lost_lines") is not None]
+    fig, ax = plt.subplots(figsize=(7, 3.5))
+    ax.plot([r["time"] / 60.0 for r in ev], [r["eval_lost_lines"] for r in ev], marker=".")
+    ax.set_yscale("symlog")  # hundreds early, a handful late: zero must stay visible
+    ax.set_xlabel("wall-clock minutes")
+    ax.set_ylabel("opponent lines lost (both sides)")
+    ax.set_title(title)
+    ax.grid(alpha=0.3)
+    png.parent.mkdir(parents=True, exist_ok=True)
+    fig.tight_layout()
+    fig.savefig(png, dpi=90)
+    return len(ev)
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("run_dir")
     p.add_argument("--games", type=int, default=200)
     p.add_argument("--png", default=None)
+    p.add_argument("--lines-png", default=None, help="plot the in-training judge's lost lines per evaluation")
     a = p.parse_args(argv)
     from wmdist.envs.factory import make_env
-    from wmdist.runtime.board_eval import default_opponent, play_games, summary
+    from wmdist.runtime.board_eval import default_opponent, judge_lines, play_games, summary
     from wmdist.runtime.evaluate import load_run
 
     cfg, spec, algo, version, weights, ckpt = load_run(a.run_dir)
@@ -57,11 +82,15 @@ def main(argv: list[str] | None = None) -> int:
     env = make_env(cfg.env, cfg.run.seed)
     counts = summary(play_games(policy, env, a.games, default_opponent(env, cfg.run.seed + 1)))
     lost = counts["lost_p0"] + counts["lost_p1"]
+    lines = judge_lines(policy, env) if env.game.name == "tictactoe" else {}
     print(json.dumps({"env": cfg.env.id, "checkpoint": ckpt.name, "weights_version": version, "games": a.games,
-                      **counts, "lost": lost, "never_loses": lost == 0}), flush=True)
+                      **counts, "lost": lost, "never_loses": lost == 0, **lines}), flush=True)
     if a.png:
         plot_losses(Path(a.run_dir) / "metrics.jsonl", cfg.eval.episodes, Path(a.png),
                     f"{cfg.env.id}: games lost to the exact solver per evaluation")
+    if a.lines_png:
+        plot_lost_lines(Path(a.run_dir) / "metrics.jsonl", Path(a.lines_png),
+                        f"{cfg.env.id}: opponent lines lost per evaluation (every line judged)")
     return 0
 
 
