@@ -2,6 +2,8 @@
 one does, and outcomes are counted from the agent's side."""
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 
 from wmdist.algos.base import Policy
@@ -136,3 +138,31 @@ def test_the_evaluator_role_and_wmdist_eval_report_lines_lost(tmp_path):
         won, drawn, lost = (int(part.split()[0]) for part in side.split(", "))
         assert won + drawn + lost > 0
 
+
+
+def test_a_run_stops_when_the_judge_finds_no_more_lost_lines_and_keeps_the_judged_weights(tmp_path):
+    """`run.stop_at_lost_lines`: the first evaluation whose whole-tree judgement is within the
+    bound stops the run (a bound every net meets here), and the final checkpoint holds the
+    weights that evaluation judged, not the learner's later ones."""
+    import io
+    import json
+
+    from wmdist.config.loader import load_config
+    from wmdist.runtime import checkpoint as ck
+    from wmdist.runtime.train import train
+
+    preset = Path(__file__).parents[2] / "configs" / "muzero_tictactoe.yaml"
+    cfg = load_config(str(preset), [f"run.dir={tmp_path}", "ray.local=true", "metrics.enabled=false",
+                                    "metrics.tensorboard=false", "checkpoint.every_seconds=0", "run.max_minutes=3",
+                                    "eval.every_seconds=0", "eval.every_env_steps=400", "eval.episodes=2",
+                                    "replay.min_size=100", "learner.batch_size=8", "algo.search.num_simulations=2",
+                                    "algo.hidden=[8]", "algo.latent_dim=8", "run.stop_at_lost_lines=1000"])
+    out = io.StringIO()
+    assert train(cfg=cfg, out=out) == 0, out.getvalue()
+    assert "the judge found" in out.getvalue()
+    run_dir = next(p for p in tmp_path.iterdir() if p.is_dir())
+    evals = [json.loads(x) for x in (run_dir / "metrics.jsonl").read_text().splitlines() if '"kind": "eval"' in x
+             or '"kind":"eval"' in x]
+    assert evals and evals[0]["eval_lost_lines"] <= 1000
+    version, _ = ck.load_weights(ck.latest_checkpoint(run_dir))
+    assert version == evals[0]["eval_version"]

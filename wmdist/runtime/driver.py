@@ -96,6 +96,7 @@ class Driver:
         self.train_returns: collections.deque = collections.deque(maxlen=100)
         self.train_lengths: collections.deque = collections.deque(maxlen=100)
         self.eval_return: float | None = None
+        self.final_weights: tuple | None = None  # (version, weights) a stop-at-judge evaluation kept
         self.eval_length: float | None = None
         self.losses: dict[str, float] = {}
         self.collector_versions: dict[int, int] = {}
@@ -154,6 +155,10 @@ class Driver:
         extra = {k: v for k, v in res.items() if k.startswith("eval_") and isinstance(v, (int, float))}
         self._log({"kind": "eval", "eval_return": self.eval_return, "eval_length": self.eval_length,
                    "eval_min": float(np.min(res["returns"])), "eval_version": res["version"], **extra})
+        if res.get("judged_weights") is not None and self.stop_reason is None:
+            self.final_weights = (res["version"], res["judged_weights"])
+            self.stop_reason = ("done", f"the judge found {res['eval_lost_lines']} lost lines of {res['eval_lines']} "
+                                        f"(weights v{res['version']} kept)")
 
     def maybe_checkpoint(self) -> None:
         every = self.cfg.checkpoint.every_seconds
@@ -352,6 +357,8 @@ class Driver:
         try:
             state = get(self.topo.learner.state.remote(), timeout=120)
             version, weights = get(self.topo.learner.weights.remote(), timeout=120)
+            if self.final_weights is not None:
+                version, weights = self.final_weights  # what the evaluator judged, not what came after
         except Exception:  # noqa: BLE001 - the learner is gone: nothing newer to save
             return None
         replay = self.topo.replay if self.cfg.checkpoint.replay else None

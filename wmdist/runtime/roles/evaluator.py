@@ -66,13 +66,14 @@ class EvaluatorRole:
         else:
             self.venv = make_vector_env(cfg.env, min(cfg.eval.envs, cfg.eval.episodes), seed)
         self.version = -1
+        self.weights = None  # the weights being evaluated (sent back when the judge says stop)
 
     def evaluate(self) -> dict:
         t0 = time.monotonic()
         version, weights = pull(self.broker, self.version)
         if weights is not None:
             self.policy.set_weights(weights, version)
-            self.version = version
+            self.version, self.weights = version, weights
         extra: dict = {}
         if self.board is not None:
             from wmdist.runtime.board_eval import play_games
@@ -95,7 +96,12 @@ class EvaluatorRole:
         from wmdist.runtime.board_eval import judge_lines
 
         lines = judge_lines(self.policy, self.board)
-        return {"eval_lost_lines": int(lines["lost_lines"]), "eval_lines": int(lines["lines"])}
+        out = {"eval_lost_lines": int(lines["lost_lines"]), "eval_lines": int(lines["lines"])}
+        stop_at = self.cfg.run.stop_at_lost_lines
+        if stop_at is not None and out["eval_lost_lines"] <= stop_at:
+            # the learner has moved on since these weights: the run keeps the ones that were judged
+            out["judged_weights"] = self.weights
+        return out
 
     def ping(self) -> bool:
         return True
