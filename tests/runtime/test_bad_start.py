@@ -54,7 +54,6 @@ def test_more_cpus_than_the_machine_fails_before_ray_starts(tmp_path, capsys):
 
 @pytest.mark.parametrize("config, sets", [
     (MUZERO, ["run.stop_at_lost_lines=0"]),  # CartPole has no game tree to judge
-    (str(ROOT / "configs" / "muzero_tictactoe.yaml"), ["run.stop_at_lost_lines=0", "eval.every_seconds=0"]),
     (str(ROOT / "configs" / "muzero_tictactoe.yaml"), ["run.stop_at_lost_lines=-1"]),
 ])
 def test_stop_at_lost_lines_without_a_judge_is_one_line(tmp_path, capsys, config, sets):

@@ -1,18 +1,12 @@
 """The EfficientZero MinAtar presets: MuZero's MinAtar settings (10x10 grid network, 16
 simulations, the 100k-step / 45-minute budget) with EfficientZero's three additions on, and
-each runs self-play with the value-prefix search and takes learner updates in process."""
+each takes its first steps in tests/runtime/test_local_runner.py."""
 from pathlib import Path
 
-import numpy as np
 import pytest
-import torch
 
-from tests.algos.muzero.loop import InProcessLoop
-from wmdist.algos.efficientzero import EfficientZero
 from wmdist.config.loader import load_config
-from wmdist.envs.factory import env_spec
 
-torch.set_num_threads(1)
 CONFIGS = Path(__file__).resolve().parents[3] / "configs"
 
 
@@ -29,14 +23,3 @@ def test_preset_is_the_muzero_one_plus_the_three_additions(game):
         assert getattr(a, field) == getattr(mz.algo, field), field
     assert a.search.num_simulations == mz.algo.search.num_simulations
 
-
-def test_breakout_self_play_and_updates():
-    cfg = load_config(CONFIGS / "efficientzero_minatar_breakout.yaml")
-    spec = env_spec(cfg.env)
-    algo = EfficientZero(spec, cfg.algo, seed=0)
-    loop = InProcessLoop(algo, cfg.env, num_envs=2, seq_len=cfg.replay.seq_len, overlap=cfg.replay.overlap)
-    loop.collect(40)
-    assert loop.env_steps == 80 and loop.sequences
-    metrics = loop.train(3, 8)
-    assert all(np.isfinite(m["loss"]) for m in metrics)
-    assert all(np.isfinite(m["consistency_loss"]) for m in metrics)
