@@ -139,17 +139,16 @@ def test_the_evaluator_role_and_wmdist_eval_report_lines_lost(tmp_path):
         assert won + drawn + lost > 0
 
 
-
 def test_a_run_stops_when_the_judge_finds_no_more_lost_lines_and_keeps_the_judged_weights(tmp_path):
     """`run.stop_at_lost_lines`: the first evaluation whose whole-tree judgement is within the
     bound stops the run (a bound every net meets here), and the final checkpoint holds the
     weights that evaluation judged, not the learner's later ones."""
     import io
-    import json
 
     from wmdist.config.loader import load_config
     from wmdist.runtime import checkpoint as ck
     from wmdist.runtime.train import train
+    from wmdist.telemetry.curves import read_jsonl
 
     preset = Path(__file__).parents[2] / "configs" / "muzero_tictactoe.yaml"
     cfg = load_config(str(preset), [f"run.dir={tmp_path}", "ray.local=true", "metrics.enabled=false",
@@ -161,8 +160,7 @@ def test_a_run_stops_when_the_judge_finds_no_more_lost_lines_and_keeps_the_judge
     assert train(cfg=cfg, out=out) == 0, out.getvalue()
     assert "the judge found" in out.getvalue()
     run_dir = next(p for p in tmp_path.iterdir() if p.is_dir())
-    evals = [json.loads(x) for x in (run_dir / "metrics.jsonl").read_text().splitlines() if '"kind": "eval"' in x
-             or '"kind":"eval"' in x]
+    evals = [r for r in read_jsonl(run_dir / "metrics.jsonl") if r.get("kind") == "eval"]
     assert evals and evals[0]["eval_lost_lines"] <= 1000
     version, _ = ck.load_weights(ck.latest_checkpoint(run_dir))
     assert version == evals[0]["eval_version"]

@@ -19,47 +19,38 @@ from pathlib import Path
 from wmdist.telemetry.curves import read_jsonl
 
 
+def _plot(xs: list, ys: list, xlabel: str, ylabel: str, title: str, png: Path, symlog: bool = False) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(7, 3.5))
+    ax.plot(xs, ys, marker=".")
+    if symlog:
+        ax.set_yscale("symlog")  # hundreds early, a handful late: zero must stay visible
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    ax.set_title(title)
+    ax.grid(alpha=0.3)
+    png.parent.mkdir(parents=True, exist_ok=True)
+    fig.tight_layout()
+    fig.savefig(png, dpi=90)
+
+
 def plot_losses(metrics: Path, games_per_eval: int, png: Path, title: str) -> None:
     """Games lost per evaluation: against a perfect opponent the mean outcome is -losses / games."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     # Evaluations against the opponent log eval_min (older runs' self-play evaluations did not).
     ev = [r for r in read_jsonl(metrics) if r.get("kind") == "eval" and r.get("eval_min") is not None]
-    steps = [r["env_steps"] for r in ev]
-    lost = [round(-r["eval_return"] * games_per_eval) for r in ev]
-    fig, ax = plt.subplots(figsize=(7, 3.5))
-    ax.plot(steps, lost, marker=".")
-    ax.set_xlabel("env steps")
-    ax.set_ylabel(f"games lost of {games_per_eval}")
-    ax.set_title(title)
-    ax.grid(alpha=0.3)
-    png.parent.mkdir(parents=True, exist_ok=True)
-    fig.tight_layout()
-    fig.savefig(png, dpi=90)
+    _plot([r["env_steps"] for r in ev], [round(-r["eval_return"] * games_per_eval) for r in ev],
+          "env steps", f"games lost of {games_per_eval}", title, png)
 
 
-def plot_lost_lines(metrics: Path, png: Path, title: str) -> int:
-    """Opponent lines lost per in-training evaluation against minutes; returns the points drawn."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+def plot_lost_lines(metrics: Path, png: Path, title: str) -> None:
+    """Opponent lines lost per in-training evaluation (the whole-tree judge) against minutes."""
     ev = [r for r in read_jsonl(metrics) if r.get("kind") == "eval" and r.get("eval_lost_lines") is not None]
-    fig, ax = plt.subplots(figsize=(7, 3.5))
-    ax.plot([r["time"] / 60.0 for r in ev], [r["eval_lost_lines"] for r in ev], marker=".")
-    ax.set_yscale("symlog")  # hundreds early, a handful late: zero must stay visible
-    ax.set_xlabel("wall-clock minutes")
-    ax.set_ylabel("opponent lines lost (both sides)")
-    ax.set_title(title)
-    ax.grid(alpha=0.3)
-    png.parent.mkdir(parents=True, exist_ok=True)
-    fig.tight_layout()
-    fig.savefig(png, dpi=90)
-    return len(ev)
+    _plot([r["time"] / 60.0 for r in ev], [r["eval_lost_lines"] for r in ev],
+          "wall-clock minutes", "opponent lines lost (both sides)", title, png, symlog=True)
 
 
 def main(argv: list[str] | None = None) -> int:

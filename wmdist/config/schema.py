@@ -25,7 +25,7 @@ class RunSection:
     stop_at_eval_return: float | None = param(None, "stop once a greedy evaluation's mean return reaches this (null = never)")
     stop_at_lost_lines: int | None = param(
         None, "tic-tac-toe: stop once the evaluator's whole-tree judge finds at most this many lost lines; the final "
-        "checkpoint then plays the judged weights, not the learner's later ones (null = never)")
+        "checkpoint then plays the judged weights, not the learner's later ones (null = never)", ge=0)
     log_every_seconds: float = param(2.0, "how often the driver gathers metrics, logs and prints progress", gt=0)
     plot_every_seconds: float = param(30.0, "how often the learning-curve PNG is redrawn", gt=0)
 

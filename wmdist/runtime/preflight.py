@@ -35,12 +35,9 @@ def check_env_and_algo(cfg: RunConfig) -> tuple[EnvSpec, Any]:
     from wmdist.runtime.train import env_spec_or_error
 
     spec = env_spec_or_error(cfg)
-    if cfg.run.stop_at_lost_lines is not None:
-        if cfg.run.stop_at_lost_lines < 0:
-            raise ConfigError(f"run.stop_at_lost_lines: {cfg.run.stop_at_lost_lines} is out of range (must be >= 0)")
-        if cfg.env.id != "board:tictactoe":  # with the evaluator off it simply never fires
-            raise ConfigError(f"run.stop_at_lost_lines needs the evaluator's whole-tree judge, which only "
-                              f"board:tictactoe has (env.id is {cfg.env.id})")
+    if cfg.run.stop_at_lost_lines is not None and cfg.env.id != "board:tictactoe":  # evaluator off: never fires
+        raise ConfigError(f"run.stop_at_lost_lines needs the evaluator's whole-tree judge, which only "
+                          f"board:tictactoe has (env.id is {cfg.env.id})")
     try:
         algo = build_algorithm(cfg, spec, cfg.run.seed)
         algo.check_run(cfg)
