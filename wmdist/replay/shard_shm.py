@@ -31,7 +31,7 @@ import numpy as np
 from wmdist.algos.base import FieldSpec
 from wmdist.replay.batch import SequenceBatch
 from wmdist.replay.shard import DROP_REASONS, ReplayShard
-from wmdist.replay.shm import H_CLOCK, H_COUNT, H_HEAD, H_STALE, ShmSegment
+from wmdist.replay.shm import H_CLOCK, H_COUNT, H_HEAD, H_IBASE, H_IFIRST, H_IFLIGHT, H_STALE, ShmSegment
 from wmdist.replay.storage_shm import ShmStorage
 from wmdist.replay.sumtree import SumTree
 
@@ -88,6 +88,7 @@ class ShmShard(ReplayShard):
     def __init__(self, fields: dict[str, FieldSpec], seq_len: int, capacity: int, segment: ShmSegment,
                  sampler: str = "uniform", alpha: float = 0.6, seed: int = 0, shard_id: int = 0) -> None:
         self.seg = segment
+        self._draining = False  # `_index` called by `drain` (client commits), not by an insert
         saved = segment.header.copy(), segment.fheader.copy()
         super().__init__(fields, seq_len, capacity, sampler, alpha, ShmStorage(segment), seed, shard_id)
         segment.header[:], segment.fheader[:] = saved  # the base __init__ reset count, clock, max_priority
@@ -111,6 +112,7 @@ class ShmShard(ReplayShard):
         self.counters["drops_corrupt"] += int((torn & (self.stamp >= 0)).sum())
         self.stamp[torn] = -1
         self.gen[torn] += 1
+        self._finish_indexing()
         live = np.flatnonzero(self.stamp >= 0)
         # a commit cut short after its stamps but before the header: counts cover what is there
         self.count = max(self.count, int(max(self.stamp.max(initial=-1), self.lease.max(initial=-1))) + 1)
@@ -118,6 +120,32 @@ class ShmShard(ReplayShard):
         self.tree = SumTree(self.capacity)
         self.tree.set(live, self._mass(self.priority[live]))
         self.drain()  # inserts acknowledged (committed in shared memory) but not indexed yet
+
+    def _finish_indexing(self) -> None:
+        """The shard died while making rows live: its inserts counter is set (not added to)
+        from the count before that indexing plus the rows it made live, so it is exact
+        whether the death came before or after the counter's write."""
+        h = self.seg.header
+        if not h[H_IFLIGHT]:
+            return
+        first = int(h[H_IFIRST])
+        if first >= 0:  # an actor-call insert: write ids first .. count-1, stamped in one go
+            done = (self.stamp >= first) & (self.stamp < self.count)
+        else:  # a drain: its rows are live under the lease it has not cleared yet
+            done = (self.lease >= 0) & (self.stamp == self.lease)
+            self.lease[done] = -1
+        self.counters["inserts"] = int(h[H_IBASE]) + int(done.sum())
+        h[H_IFLIGHT] = 0
+
+    def _index(self, slots: np.ndarray, ids: np.ndarray, version: np.ndarray, episode: np.ndarray,
+               steps: np.ndarray, prio: np.ndarray) -> int:
+        """`ReplayShard._index` in a bracket a restarted shard can finish (`_finish_indexing`);
+        the caller clears the flag once the rows' own bookkeeping (a drain's leases) is done."""
+        h = self.seg.header
+        h[H_IBASE] = self.counters["inserts"]
+        h[H_IFIRST] = -1 if self._draining else int(ids[0])
+        h[H_IFLIGHT] = 1  # last
+        return super()._index(slots, ids, version, episode, steps, prio)
 
     def shm_info(self) -> dict:
         return {"name": self.seg.name, "token": self.seg.token, "capacity": self.capacity, "seq_len": self.T}
@@ -144,7 +172,9 @@ class ShmShard(ReplayShard):
         def guarded(slots: np.ndarray, meta: dict) -> None:
             self.stamp[slots] = -1  # a reader holding a draw of an evicted row rejects it from here on
             write(slots, meta)
-        return super()._place(version, episode, steps, guarded)
+        stored = super()._place(version, episode, steps, guarded)
+        self.seg.header[H_IFLIGHT] = 0
+        return stored
 
     def insert(self, batch: SequenceBatch, min_version: int | None = None) -> int:
         """The actor-call insert; rows beyond the unreserved slots would be evicted by this
@@ -195,8 +225,13 @@ class ShmShard(ReplayShard):
                 ready, st = ready[~bad], st[~bad]
             prio = np.full(ready.size, self.max_priority)  # new items at the current max priority
             # live under the committed write id (indexed once: `stamp != lease` above)
-            stored = self._index(ready, self.lease[ready], self.c_version[ready], self.c_episode[ready], st, prio)
+            self._draining = True
+            try:
+                stored = self._index(ready, self.lease[ready], self.c_version[ready], self.c_episode[ready], st, prio)
+            finally:
+                self._draining = False
             self.lease[ready] = -1
+            self.seg.header[H_IFLIGHT] = 0
             return stored
 
     def count_lag(self, n: int) -> None:

@@ -1,7 +1,8 @@
 """ShmSegment: one shard's ring arrays, index and header in one POSIX shared-memory segment.
 
 Layout (each array 64-byte aligned, all views of the one mapping):
-  header   [32] int64    magic, layout hash, run token, count, clock, head, closed, stale reads
+  header   [32] int64    magic, layout hash, run token, count, clock, head, closed, stale reads,
+                         the indexing in flight
   fheader  [4] float64   max_priority
   counters [32] int64    the shard's counters (`shard_shm.COUNTERS` order)
   meta     [C] per slot  stamp, version, episode, steps, born, gen, lease, commit,
@@ -36,6 +37,9 @@ from wmdist.algos.base import FieldSpec
 
 MAGIC = 0x776D64697374_3231  # "wmdist" + 21: a segment this module formatted
 H_MAGIC, H_LAYOUT, H_TOKEN, H_COUNT, H_CLOCK, H_HEAD, H_CLOSED, H_STALE = range(8)
+# an indexing in flight (see `ShmShard._index`): inserts counted before it, first write id of
+# an actor-call insert (-1: a drain of client commits), and the flag (set last, cleared last)
+H_IBASE, H_IFIRST, H_IFLIGHT = range(8, 11)
 # index (written by the shard), then the commit record a client writes into a reserved slot
 META_I64 = ("stamp", "version", "episode", "steps", "born", "gen", "lease", "commit", "c_version", "c_episode",
             "c_steps")
