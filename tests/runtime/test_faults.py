@@ -123,7 +123,7 @@ def test_redis_run_survives_a_killed_server_a_killed_driver_and_ctrl_c(tmp_path)
     """redis-server SIGKILLed mid-run: the driver restarts it and the run goes on. The driver
     SIGKILLed: its redis-server goes too, and --resume continues counters, weights and replay.
     Ctrl-C: a final checkpoint, exit 130, nothing left running, no traceback."""
-    run = Train(FAKE, "--set", f"run.dir={tmp_path}", "replay.backend=redis", "replay.redis_appendfsync=always",
+    run = Train(FAKE, "--set", f"run.dir={tmp_path}", "replay.backend=redis", "replay.redis_appendfsync=always", "replay.shards=2",
                 *RUN)
     try:
         run_dir = run.run_dir()
@@ -164,19 +164,24 @@ def test_redis_run_survives_a_killed_server_a_killed_driver_and_ctrl_c(tmp_path)
 
 
 @pytest.mark.slow
-def test_ctrl_c_on_the_memory_backend_checkpoints_and_exits_130(tmp_path):
+def test_sigterm_on_the_memory_backend_checkpoints_and_exits_143(tmp_path):
+    """`kill PID` / `docker stop` (SIGTERM to the driver alone) end a run the way Ctrl-C does
+    (the redis test above): a final checkpoint with the replay, exit status 143 (128 +
+    SIGTERM), no traceback, and the resume command. Ray's own driver handler would abort."""
     run = Train(FAKE, "--set", f"run.dir={tmp_path}", *RUN)
     try:
         run_dir = run.run_dir()
         run.wait_for(lambda: _checkpoint_after(run_dir, 0), label="a first checkpoint")
         before = load_counters(latest_checkpoint(run_dir))
         time.sleep(1.0)
-        rc = run.ctrl_c()
+        run.proc.send_signal(signal.SIGTERM)
+        rc = run.proc.wait(120)
+        run.reader.join(5)
     finally:
         if run.proc.poll() is None:
             run.kill()
-    assert rc == 130, run.text
-    assert "Traceback" not in run.text
+    assert rc == 143, run.text
+    assert "interrupted" in run.text and "Traceback" not in run.text and "SIGTERM received" not in run.text
     final = load_counters(latest_checkpoint(run_dir))
     assert final["updates"] >= before["updates"]
     assert (latest_checkpoint(run_dir) / "replay").is_dir()

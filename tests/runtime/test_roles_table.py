@@ -23,7 +23,7 @@ TOY = "algo.name=tests.runtime.toy_role:ToyAlgo"
 
 def test_table_lists_every_builtin_role_once():
     assert BUILTIN_NAMES == ("replay", "limiter", "learner", "collector", "reanalyzer", "evaluator")
-    cfg = load_config(CFG, ["reanalyze.num=3", "eval.every_env_steps=500"])
+    cfg = load_config(CFG, ["reanalyze.num=3", "eval.every_env_steps=500", "replay.shards=2"])
     got = roles(cfg)
     assert got["collector"][1] == 2 and got["reanalyzer"][1] == 3 and got["evaluator"][1] == 1
     assert got["replay"][1] == 2 and got["replay"][0].cpus == pytest.approx(0.05)
