@@ -21,14 +21,14 @@ from wmdist.runtime.train import env_spec_or_error
 CFG = str(Path(__file__).parent / "fake.yaml")
 
 
-def _topology(tmp_path, *overrides):
-    cfg = load_config(CFG, [f"run.dir={tmp_path}", *overrides])
+def _topology(tmp_path, *overrides, local: bool = False):
+    cfg = load_config(CFG, [f"run.dir={tmp_path}", *overrides, *(["ray.local=true"] if local else [])])
     spec = env_spec_or_error(cfg)
     fields = build_algorithm(cfg, spec, 0).step_fields()
     run_dir = tmp_path / "run"
     run_dir.mkdir(exist_ok=True)
     (run_dir / "config.yaml").write_text(dump_yaml(cfg))
-    return build(cfg, spec, run_dir, fields)
+    return build(cfg, spec, run_dir, fields, local=local)
 
 
 def _complete_sequences_only(sample) -> None:
@@ -93,12 +93,16 @@ def test_full_topology_versions_reach_collectors_and_actions_follow_weights(ray_
 
 
 class _RestartDriver(Driver):
-    """Runs past its time budget until a collector restart has been seen (for at most 240 s, so
+    """Runs past its time budget until `restarts` collector restarts were seen (for at most 240 s, so
     a restart that never comes fails the assertion, not the 300 s test timeout): on a loaded
     machine start-up alone can outlast a short budget."""
 
+    def __init__(self, *args, restarts: int = 1, **kwargs) -> None:
+        super().__init__(*args, **kwargs)
+        self.restarts_wanted = restarts
+
     def _budget_done(self) -> bool:
-        restarted = self.c.restarts.get("collector", 0) >= 1
+        restarted = self.c.restarts.get("collector", 0) >= self.restarts_wanted
         return (restarted and super()._budget_done()) or self.elapsed() > 240
 
 
@@ -117,36 +121,36 @@ def _kill_later(ray, actor, ready, record: dict) -> threading.Thread:
     return thread
 
 
-@pytest.mark.parametrize("when", ["stepping", "starting"])
-def test_killed_collector_restarts_with_current_weights(ray_session, tmp_path, when):
-    """Killed mid-run (its call fails), or during start-up (no call fails: its queued calls run in
-    the replacement), the collector comes back with current weights and the restart is counted."""
+def test_killed_collectors_restart_with_current_weights(ray_session, tmp_path):
+    """One run, both faults: collector 0 killed during start-up (no call fails: its queued calls
+    run in the replacement), collector 1 killed mid-run (its call fails). Each comes back with
+    current weights, and both restarts are counted."""
     ray = ray_session
-    topo = _topology(tmp_path, "run.max_minutes=0.15")
-    victim = topo.collectors[0]
-    killed_at = {"version": ray.get(topo.broker.current_version.remote())}
+    topo = _topology(tmp_path, "run.max_minutes=0.15", "actors.num=2")
     counters = Counters()
+    killed = {"starting": {"version": ray.get(topo.broker.current_version.remote())}, "stepping": {}}
 
-    def ready() -> bool:
-        if when == "starting":
-            return True
+    def stepping() -> bool:
         if counters.env_steps == 0:  # a fixed delay could fall inside start-up
             return False
-        killed_at["version"] = ray.get(topo.broker.current_version.remote())
+        killed["stepping"]["version"] = ray.get(topo.broker.current_version.remote())
         return True
 
-    timer = _kill_later(ray, victim, ready, killed_at)
+    timers = [_kill_later(ray, topo.collectors[0], lambda: True, killed["starting"]),
+              _kill_later(ray, topo.collectors[1], stepping, killed["stepping"])]
     try:
-        result = _RestartDriver(topo, counters).run()
-        timer.join()
-        assert killed_at.get("killed")
+        result = _RestartDriver(topo, counters, restarts=2).run()
+        for t in timers:
+            t.join()
+        assert all(k.get("killed") for k in killed.values())
         assert result.status == "done", result.message
-        assert result.counters.restarts["collector"] >= 1
+        assert result.counters.restarts["collector"] >= 2
         assert result.counters.updates > 0
-        # back with weights at least as new as when it died, and stepping again
-        assert ray.get(victim.current_version.remote(), timeout=60) >= killed_at["version"]
-        stats = ray.get(victim.run_segment.remote())
-        assert stats["env_steps"] > 0 or stats["limiter_blocked"]
+        # back with weights at least as new as when each died, and stepping again
+        for victim, when in zip(topo.collectors, ("starting", "stepping")):
+            assert ray.get(victim.current_version.remote(), timeout=60) >= killed[when]["version"], when
+            stats = ray.get(victim.run_segment.remote())
+            assert stats["env_steps"] > 0 or stats["limiter_blocked"], when
         sample = topo.replay.sample(64, timeout=5)
         assert sample is not None
         _complete_sequences_only(sample)
@@ -311,14 +315,16 @@ def test_run_stops_once_the_eval_return_reaches_the_target(tmp_path):
 
 @pytest.mark.parametrize("sampler", ["uniform", "prioritized"])
 def test_learner_writes_priorities_back_only_when_sampling_by_priority(ray_session, tmp_path, sampler):
-    import ray
+    """Prioritized on Ray (the learner actor writes back to the shard actor); uniform, where
+    nothing may be written, under the local runner (the same learner and shard code)."""
+    from wmdist.runtime.calls import get
 
     topo = _topology(tmp_path, f"replay.sampler={sampler}", "replay.min_size=32", "run.max_updates=20",
-                     "run.max_minutes=3", "actors.num=1")
+                     "run.max_minutes=3", "actors.num=1", local=sampler == "uniform")
     try:
         result = Driver(topo, Counters()).run()
         assert result.counters.updates >= 20
-        ray.get(topo.replay.shards[0].save.remote(str(tmp_path / "shard.npz")))
+        get(topo.replay.shards[0].save.remote(str(tmp_path / "shard.npz")))
         with np.load(tmp_path / "shard.npz") as saved:
             stamp, priority = saved["i_stamp"], saved["i_priority"]
         live = priority[stamp >= 0]  # occupied slots
