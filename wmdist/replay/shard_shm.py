@@ -88,7 +88,6 @@ class ShmShard(ReplayShard):
     def __init__(self, fields: dict[str, FieldSpec], seq_len: int, capacity: int, segment: ShmSegment,
                  sampler: str = "uniform", alpha: float = 0.6, seed: int = 0, shard_id: int = 0) -> None:
         self.seg = segment
-        self._draining = False  # `_index` called by `drain` (client commits), not by an insert
         saved = segment.header.copy(), segment.fheader.copy()
         super().__init__(fields, seq_len, capacity, sampler, alpha, ShmStorage(segment), seed, shard_id)
         segment.header[:], segment.fheader[:] = saved  # the base __init__ reset count, clock, max_priority
@@ -143,7 +142,8 @@ class ShmShard(ReplayShard):
         the caller clears the flag once the rows' own bookkeeping (a drain's leases) is done."""
         h = self.seg.header
         h[H_IBASE] = self.counters["inserts"]
-        h[H_IFIRST] = -1 if self._draining else int(ids[0])
+        drained = not slots.size or bool(self.lease[slots[0]] == ids[0])  # a drain's rows keep their lease until it ends
+        h[H_IFIRST] = -1 if drained else int(ids[0])
         h[H_IFLIGHT] = 1  # last
         return super()._index(slots, ids, version, episode, steps, prio)
 
@@ -225,11 +225,7 @@ class ShmShard(ReplayShard):
                 ready, st = ready[~bad], st[~bad]
             prio = np.full(ready.size, self.max_priority)  # new items at the current max priority
             # live under the committed write id (indexed once: `stamp != lease` above)
-            self._draining = True
-            try:
-                stored = self._index(ready, self.lease[ready], self.c_version[ready], self.c_episode[ready], st, prio)
-            finally:
-                self._draining = False
+            stored = self._index(ready, self.lease[ready], self.c_version[ready], self.c_episode[ready], st, prio)
             self.lease[ready] = -1
             self.seg.header[H_IFLIGHT] = 0
             return stored
