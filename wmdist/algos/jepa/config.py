@@ -15,6 +15,10 @@ class JepaConfig:
     cnn_depth: int = param(16, "channels of the first of four stride-2 convs on a 64x64 frame (LeWM: a ViT-tiny)", ge=1)
     embed_dim: int = param(32, "embedding width D after the projector (LeWM: 192)", ge=1)
     proj_hidden: int = param(256, "hidden width of the projector MLP (LeWM: a BatchNorm projector)", ge=1)
+    bn_frames: int = param(512, "frames of the latest batches on which the learner re-estimates the projector's "
+                                "BatchNorm statistics with the current weights before each publish (planning uses "
+                                "them); 0 = torch's running average over ~10 batches, under which success swung "
+                                "between 35% and 95% from one published version to the next", ge=0)
     # --- predictor --------------------------------------------------------------------
     history: int = param(1, "embeddings and actions the predictor sees (LeWM: 3; the point mass is Markov in one frame)",
                          ge=1)

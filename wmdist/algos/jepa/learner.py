@@ -15,7 +15,7 @@ import torch
 
 from wmdist.algos.base import Batch, Learner, NonFiniteLoss, UpdateResult, Weights
 from wmdist.algos.jepa.config import JepaConfig
-from wmdist.algos.jepa.model import FRAME_CHANNELS, JepaModel, model_weights
+from wmdist.algos.jepa.model import FRAME_CHANNELS, JepaModel, model_weights, recalibrate_batchnorm
 from wmdist.algos.jepa.sigreg import effective_rank, random_directions, sigreg
 from wmdist.envs.spec import EnvSpec
 from wmdist.nets.actions import action_to_model
@@ -38,6 +38,7 @@ class JepaLearner(Learner):
         self.opt = GuardedStep(self.model.parameters(), OptimConfig(kind="adam", lr=cfg.lr, clip_norm=cfg.grad_clip))
         self.generator = torch.Generator(self.device).manual_seed(seed)
         self.updates = 0
+        self.recent: torch.Tensor | None = None  # [<= bn_frames, 64, 64, 3] uint8, the latest real frames
 
     def loss(self, batch: Batch) -> tuple[torch.Tensor, dict[str, float]]:
         """The JEPA loss of one batch and its parts (floats) for logging."""
@@ -64,12 +65,19 @@ class JepaLearner(Learner):
         dirs = random_directions(cfg.embed_dim, cfg.sigreg_projections, self.generator, self.device)  # [D, M]
         reg = sigreg(real, dirs, cfg.sigreg_knots, cfg.sigreg_t_max)
         loss = pred_loss + cfg.sigreg_weight * reg
+        if cfg.bn_frames:
+            self._keep_frames(obs[..., :FRAME_CHANNELS][mask > 0])
         with torch.no_grad():
             copy = ((z_hist[:, :, -1] - target) ** 2).mean(-1)  # [B, T-h] predicting no change: the bar to beat
             metrics = {"loss": float(loss), "pred_loss": float(pred_loss), "sigreg": float(reg),
                        "copy_loss": float((copy * w).sum() / w.sum().clamp(min=1.0)),
                        "effective_rank": effective_rank(real), "embed_std": float(real.std(0).mean())}
         return loss, metrics
+
+    def _keep_frames(self, frames: torch.Tensor) -> None:  # [N, 64, 64, 3]
+        """The latest `bn_frames` real frames, for re-estimating the BatchNorm statistics."""
+        both = frames if self.recent is None else torch.cat([self.recent, frames])
+        self.recent = both[-self.cfg.bn_frames:].clone()
 
     # --- Learner API ----------------------------------------------------------------
     def update(self, batch: Batch) -> UpdateResult:
@@ -81,6 +89,8 @@ class JepaLearner(Learner):
         return UpdateResult(metrics=metrics)
 
     def get_weights(self) -> Weights:
+        if self.recent is not None:  # the statistics planning uses, for exactly these weights
+            recalibrate_batchnorm(self.model, self.recent)
         return model_weights(self.model, self.updates)
 
     def state_dict(self) -> dict[str, Any]:

@@ -62,6 +62,32 @@ class JepaModel(nn.Module):
         return z_hist[:, -1] + self.predictor(x)
 
 
+@torch.no_grad()
+def recalibrate_batchnorm(model: JepaModel, frames: torch.Tensor, chunk: int = 512) -> None:
+    """Set every BatchNorm's running statistics to those of `frames` (uint8 [N, 64, 64, 3]) under
+    the current weights: the average over chunks of `chunk` frames (exact for one chunk).
+
+    Training normalises with batch statistics, acting with the running ones; torch's running
+    average (momentum 0.1) mixes ~10 batches of older weights, and the embeddings planning
+    compares move with it (issue 23: 35% vs 85% success for the same weights).
+    """
+    bns = [m for m in model.modules() if isinstance(m, nn.modules.batchnorm._BatchNorm)]
+    if not bns or frames.shape[0] == 0:
+        return
+    was_training, momenta = model.training, [m.momentum for m in bns]
+    for m in bns:
+        m.reset_running_stats()
+        m.momentum = None  # a cumulative average over the chunks below
+    model.train()
+    try:
+        for i in range(0, frames.shape[0], chunk):
+            model.encode(frames[i:i + chunk])
+    finally:
+        for m, mom in zip(bns, momenta):
+            m.momentum = mom
+        model.train(was_training)
+
+
 def model_weights(model: JepaModel, updates: int) -> Weights:
     """The published snapshot: the state dict as numpy, plus the update count behind it."""
     out = {k: v.detach().cpu().numpy().copy() for k, v in model.state_dict().items()}
