@@ -8,6 +8,7 @@ embeddings from collapsing (with `sigreg_weight: 0` they do, and the MSE goes to
 """
 from __future__ import annotations
 
+from collections import deque
 from typing import Any, Mapping
 
 import numpy as np
@@ -38,7 +39,7 @@ class JepaLearner(Learner):
         self.opt = GuardedStep(self.model.parameters(), OptimConfig(kind="adam", lr=cfg.lr, clip_norm=cfg.grad_clip))
         self.generator = torch.Generator(self.device).manual_seed(seed)
         self.updates = 0
-        self.recent: torch.Tensor | None = None  # [<= bn_frames, 64, 64, 3] uint8, the latest real frames
+        self._frames: deque[torch.Tensor] = deque()  # the latest batches' real frames, [N_i, 64, 64, 3] uint8 each
 
     def loss(self, batch: Batch) -> tuple[torch.Tensor, dict[str, float]]:
         """The JEPA loss of one batch and its parts (floats) for logging."""
@@ -65,8 +66,6 @@ class JepaLearner(Learner):
         dirs = random_directions(cfg.embed_dim, cfg.sigreg_projections, self.generator, self.device)  # [D, M]
         reg = sigreg(real, dirs, cfg.sigreg_knots, cfg.sigreg_t_max)
         loss = pred_loss + cfg.sigreg_weight * reg
-        if cfg.bn_frames:
-            self._keep_frames(obs[..., :FRAME_CHANNELS][mask > 0])
         with torch.no_grad():
             copy = ((z_hist[:, :, -1] - target) ** 2).mean(-1)  # [B, T-h] predicting no change: the bar to beat
             metrics = {"loss": float(loss), "pred_loss": float(pred_loss), "sigreg": float(reg),
@@ -74,10 +73,20 @@ class JepaLearner(Learner):
                        "effective_rank": effective_rank(real), "embed_std": float(real.std(0).mean())}
         return loss, metrics
 
-    def _keep_frames(self, frames: torch.Tensor) -> None:  # [N, 64, 64, 3]
-        """The latest `bn_frames` real frames, for re-estimating the BatchNorm statistics."""
-        both = frames if self.recent is None else torch.cat([self.recent, frames])
-        self.recent = both[-self.cfg.bn_frames:].clone()
+    def _keep_frames(self, batch: Batch) -> None:
+        """Hold the batch's real frames; drop whole older batches the latest `bn_frames` no longer need."""
+        real = np.asarray(batch["mask"]) > 0  # [B, T]
+        self._frames.append(torch.as_tensor(np.asarray(batch["obs"])[..., :FRAME_CHANNELS][real], device=self.device))
+        held = sum(f.shape[0] for f in self._frames)
+        while held - self._frames[0].shape[0] >= self.cfg.bn_frames:
+            held -= self._frames.popleft().shape[0]
+
+    @property
+    def recent(self) -> torch.Tensor | None:
+        """The latest `bn_frames` real frames [<= bn_frames, 64, 64, 3] (None before any update or with bn_frames 0)."""
+        if not self._frames:
+            return None
+        return torch.cat(list(self._frames))[-self.cfg.bn_frames:]
 
     # --- Learner API ----------------------------------------------------------------
     def update(self, batch: Batch) -> UpdateResult:
@@ -85,12 +94,15 @@ class JepaLearner(Learner):
         if not torch.isfinite(loss.detach()).all():
             raise NonFiniteLoss(f"jepa loss is {float(loss.detach())}")
         metrics["grad_norm"] = self.opt(loss)
+        if self.cfg.bn_frames:
+            self._keep_frames(batch)
         self.updates += 1
         return UpdateResult(metrics=metrics)
 
     def get_weights(self) -> Weights:
-        if self.recent is not None:  # the statistics planning uses, for exactly these weights
-            recalibrate_batchnorm(self.model, self.recent)
+        recent = self.recent
+        if recent is not None:  # the statistics planning uses, for exactly these weights
+            recalibrate_batchnorm(self.model, recent)
         return model_weights(self.model, self.updates)
 
     def state_dict(self) -> dict[str, Any]:
