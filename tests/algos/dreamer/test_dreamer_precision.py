@@ -66,10 +66,12 @@ def test_learner_records_the_auto_choice_and_a_resumed_learner_keeps_it():
 
 def test_bf16_flag_sets_both_phases_and_an_explicit_phase_overrides_it():
     spec = bench_spec(True)
-    learner = Dreamer(spec, tiny_config(3, bf16=True, precision_actor_critic="fp32")).make_learner()
+    # with the critic replay loss on, the bf16 replay states are handed over too
+    learner = Dreamer(spec, tiny_config(3, bf16=True, precision_actor_critic="fp32", repval_scale=0.3)).make_learner()
     assert learner.precision.choice == {"world_model": "bf16", "actor_critic": "fp32"}
     m = learner.update(random_batch(spec, 2, 6)).metrics
     assert m["bf16_world_model"] == 1.0 and m["bf16_actor_critic"] == 0.0
+    assert np.isfinite(m["repval_loss"])
 
 
 def _losses(discrete: bool, wm: str, ac: str, seed: int) -> np.ndarray:

@@ -106,6 +106,8 @@ class DreamerConfig:
     slow_critic_mix: float | None = param(None, "slow critic update fraction (V2 1.0 every 100; V3 0.02 every update)", gt=0, le=1)
     slow_critic_every: int | None = param(None, "updates between slow-critic updates", ge=1)
     slow_reg_scale: float = param(1.0, "weight of the slow-critic regulariser (V3)", ge=0)
+    repval_scale: float = param(0.0, "weight of the critic replay loss: lambda-returns over the replayed rewards and "
+                                "terminations (revised DreamerV3: 0.3; 0 = off, as arXiv v1)", ge=0)
     # --- optimisation ----------------------------------------------------------------
     model_lr: float | None = param(None, "world-model Adam learning rate", gt=0)
     actor_lr: float | None = param(None, "actor Adam learning rate", gt=0)

@@ -17,6 +17,7 @@ from wmdist.algos.dreamer.config import DreamerConfig
 from wmdist.nets.kl import masked_mean
 from wmdist.nets.latent_layers import Latent
 from wmdist.algos.dreamer.nets import ActorCritic, WorldModel
+from wmdist.algos.dreamer.replay_value import ReplayStates, replay_lambda_returns
 from wmdist.algos.dreamer.returns import PercentileNormalizer, lambda_returns
 from wmdist.nets.dists import twohot_mean, twohot_nll
 
@@ -28,6 +29,8 @@ class Start:
     deter: torch.Tensor  # [N, D]
     latent: Latent  # [N]
     cont: torch.Tensor  # [N] 1 - terminal of the start state
+    rows: torch.Tensor | None = None  # [N] each start's flat row in the replayed batch [B*T]
+    replay: ReplayStates | None = None  # the whole batch's states, for the critic replay loss
 
 
 @dataclass
@@ -168,7 +171,12 @@ class ActorCriticLoss:
             else:
                 closs = closs + cfg.slow_reg_scale * 0.5 * (logits_h.float().squeeze(-1) - slow).pow(2)
         critic_loss = masked_mean(closs, weight)
-        metrics = {
+        metrics: dict[str, float] = {}
+        if cfg.repval_scale > 0 and start.replay is not None:
+            rep_loss, metrics["replay_return"] = self._replay_critic_loss(start, returns[0].detach())
+            critic_loss = critic_loss + cfg.repval_scale * rep_loss
+            metrics["repval_loss"] = float(rep_loss.detach())
+        metrics.update({
             "actor_loss": float(actor_loss.detach()),
             "critic_loss": float(critic_loss.detach()),
             "actor_entropy": float(traj.entropy.detach().mean()),
@@ -176,8 +184,31 @@ class ActorCriticLoss:
             "imag_reward": float(reward.detach().mean()),
             "value": float(value.detach().mean()),
             "return_scale": float(scale),
-        }
+        })
         return actor_loss, critic_loss, metrics
+
+    def _replay_critic_loss(self, start: Start, start_returns: torch.Tensor) -> tuple[torch.Tensor, float]:
+        """Critic NLL of the replay lambda-returns on every real, non-terminal posterior state.
+
+        start_returns: [N] imagination returns R^lambda_0 of the start states, the value
+        annotations where a state was a start (all of them with imag_starts 0); the critic's own
+        value elsewhere.
+        """
+        rep = start.replay
+        b, t_len = rep.reward.shape
+        logits = self.ac.critic({"h": rep.deter, "z": rep.latent})["critic"]  # [B*T, K]
+        annot = self._value(logits).detach().clone()  # [B*T]
+        if start.rows is not None:
+            annot[start.rows] = start_returns.to(annot.dtype)
+        valid = rep.weight > 0
+        target = replay_lambda_returns(rep.reward.float(), rep.terminal.bool(), rep.first.bool(), valid,
+                                       annot.reshape(b, t_len), self.cfg.discount, self.cfg.lam)  # [B, T]
+        if self.cfg.critic_head == "twohot":
+            nll = twohot_nll(F.log_softmax(logits.float(), -1), target.flatten(), self.bins)
+        else:
+            nll = 0.5 * (logits.float().squeeze(-1) - target.flatten()).pow(2)
+        w = rep.weight * (1.0 - rep.terminal.float())  # a terminal state has no return to learn
+        return masked_mean(nll.reshape(b, t_len), w), float(masked_mean(target, w))
 
 
 def _rows(lat: Latent, rows: slice) -> Latent:

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 from typing import Any, Mapping
 
 import numpy as np
@@ -11,6 +12,7 @@ from wmdist.algos.base import Batch, Learner, NonFiniteLoss, UpdateResult, Weigh
 from wmdist.algos.dreamer.config import DreamerConfig
 from wmdist.algos.dreamer.imagine import ActorCriticLoss, Start
 from wmdist.algos.dreamer.precision import PhasePrecision
+from wmdist.algos.dreamer.replay_value import ReplayStates
 from wmdist.nets.kl import kl_loss, masked_mean
 from wmdist.nets.latent_layers import Latent
 from wmdist.algos.dreamer.nets import ActorCritic, WorldModel, action_to_model
@@ -109,7 +111,10 @@ class DreamerLearner(Learner):
             # average over starts x H states, so fewer starts mostly add noise, not bias
             pick = torch.randperm(rows.numel(), generator=self.generator, device=rows.device)[: cfg.imag_starts]
             rows = rows[pick]
-        start = Start(h.detach()[rows], _select(z.detach(), rows), cont_target.flatten()[rows])
+        replay = None
+        if cfg.repval_scale > 0:
+            replay = ReplayStates(h.detach(), z.detach(), reward, t["terminal"].bool(), t["first"].bool(), weight)
+        start = Start(h.detach()[rows], _select(z.detach(), rows), cont_target.flatten()[rows], rows, replay)
         return loss, metrics, start
 
     # --- Learner API ----------------------------------------------------------------
@@ -119,7 +124,9 @@ class DreamerLearner(Learner):
         with prec.timed("world_model", spent), prec.autocast("world_model"):
             model_loss, metrics, start = self.world_model_loss(t)
         if prec.mode("actor_critic") == "fp32" and start.deter.dtype != torch.float32:
-            start = Start(start.deter.float(), start.latent, start.cont)  # a bf16 world model hands over bf16 states
+            # a bf16 world model hands over bf16 states
+            replay = start.replay and dataclasses.replace(start.replay, deter=start.replay.deter.float())
+            start = dataclasses.replace(start, deter=start.deter.float(), replay=replay)
         with prec.timed("actor_critic", spent), prec.autocast("actor_critic"):
             actor_loss, critic_loss, ac_metrics = self.ac_loss(start, self.generator)
         for name, loss in (("model", model_loss), ("actor", actor_loss), ("critic", critic_loss)):
