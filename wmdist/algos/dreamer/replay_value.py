@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import torch
 
+from wmdist.algos.dreamer.returns import lambda_returns
 from wmdist.nets.latent_layers import Latent
 
 
@@ -39,15 +40,13 @@ def replay_lambda_returns(
     """R_t = r_{t+1} + gamma c_{t+1} ((1 - lam) v_{t+1} + lam R_{t+1}) where o_{t+1} follows o_t in
     the same episode, else R_t = v_t (the window's end, a truncation, a terminal) -> [B, T].
 
-    The same recursion as the imagination's lambda-returns (DreamerV3 eq. 7), with c_{t+1} the
-    real continue flag 1 - terminal_{t+1}.
+    The imagination's lambda-returns (DreamerV3 eq. 7, `returns.lambda_returns`) over the real
+    steps, with c_{t+1} the real continue flag 1 - terminal_{t+1}. Where o_{t+1} does not follow
+    o_t, a "reward" of v_t with continue 0 makes that step's return v_t.
     """
-    t_len = reward.shape[1]
-    nxt = torch.zeros_like(valid)
-    nxt[:, :-1] = valid[:, 1:] & ~first[:, 1:] & valid[:, :-1]  # [B, T] o_{t+1} continues o_t's episode
-    disc = discount * (1.0 - terminal.to(reward.dtype))  # [B, T] gamma c_t
-    out = [value[:, -1]]
-    for t in reversed(range(t_len - 1)):
-        step = reward[:, t + 1] + disc[:, t + 1] * ((1 - lam) * value[:, t + 1] + lam * out[-1])
-        out.append(torch.where(nxt[:, t], step, value[:, t]))
-    return torch.stack(out[::-1], 1)
+    follows = valid[:, 1:] & ~first[:, 1:] & valid[:, :-1]  # [B, T-1] o_{t+1} continues o_t's episode
+    cont = discount * (1.0 - terminal[:, 1:].to(reward.dtype))  # [B, T-1] gamma c_{t+1}
+    r = torch.where(follows, reward[:, 1:], value[:, :-1])
+    c = torch.where(follows, cont, torch.zeros_like(cont))
+    head = lambda_returns(r.T, c.T, value.T, lam).T  # [B, T-1]; the window's last step keeps v
+    return torch.cat([head, value[:, -1:]], 1)
