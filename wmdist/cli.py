@@ -27,6 +27,17 @@ class UsageError(Exception):
     """A user mistake: printed as one line, exit status 2."""
 
 
+def _positive_int(text: str) -> int:
+    """argparse type: an int >= 1 (a count of episodes or steps), refused before anything loads."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"invalid int value: {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be >= 1, got {value}")
+    return value
+
+
 def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="wmdist", description="Distributed training of world-model agents "
                                 "(MuZero and Dreamer families) on Ray.", epilog=EXAMPLES,
@@ -62,7 +73,7 @@ def _parser() -> argparse.ArgumentParser:
                        description="Greedy episodes with the latest checkpoint of RUN_DIR; prints the returns. "
                        "Board games play the exact solver (or you, with --human).")
     v.add_argument("run_dir")
-    v.add_argument("--episodes", type=int, default=10)
+    v.add_argument("--episodes", type=_positive_int, default=10)
     v.add_argument("--video", default=None, metavar="PATH.gif", help="record the first episode")
     v.add_argument("--human", action="store_true", help="board games: play against the agent at the terminal")
 
@@ -70,7 +81,7 @@ def _parser() -> argparse.ArgumentParser:
                        description="Real frames beside the model's: 5 observed steps, then imagined.")
     d.add_argument("run_dir")
     d.add_argument("--out", default=None, help="output GIF (default RUN_DIR/dream.gif)")
-    d.add_argument("--horizon", type=int, default=45)
+    d.add_argument("--horizon", type=_positive_int, default=45)
 
     b = sub.add_parser("bench", help="run a benchmark (mcts, replay, selfplay, dreamer, envs, planner, all; soak by name)",
                        description="Each measured case prints one JSON object per line with --json.")

@@ -241,3 +241,17 @@ def test_train_with_a_broken_env_prints_one_line(broken_gym_id, tmp_path, capsys
     err = capsys.readouterr().err.strip()
     assert code == 2 and err == "wmdist: error: env.id: cannot open the simulator"
     assert not list(tmp_path.iterdir())  # refused before a run directory was made
+
+
+# --- counts on the command line ---------------------------------------------------------
+
+
+@pytest.mark.parametrize("argv", [["eval", "RUN", "--episodes", "0"], ["eval", "RUN", "--episodes", "-2"],
+                                  ["dream", "RUN", "--horizon", "0"]])
+def test_counts_below_one_are_refused_before_anything_loads(argv, capsys):
+    # RUN does not exist: the count must be refused by the parser, before the run is looked at
+    with pytest.raises(SystemExit) as ex:
+        main(argv)
+    assert ex.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()[-1]
+    assert "must be >= 1" in err

@@ -134,6 +134,38 @@ def test_unreadable_checkpoint_is_one_line(tmp_path, capsys):
     assert "cannot be read" in _one_line_exit_2(capsys, ["train", "--resume", str(run_dir)])
 
 
+def _with_replay(run_dir: Path) -> Path:
+    """Give the run's checkpoint the replay files a real run writes (one empty shard of the preset's size)."""
+    from wmdist.config.loader import load_config
+    from wmdist.replay.shard import ReplayShard
+    from wmdist.runtime.replay_client import shard_capacity
+    from wmdist.runtime.roles.setup import build_algorithm
+    from wmdist.runtime.train import env_spec_or_error
+
+    cfg = load_config(str(run_dir / "config.yaml"), [])
+    fields = build_algorithm(cfg, env_spec_or_error(cfg), 0).step_fields()
+    folder = latest_checkpoint(run_dir) / "replay"
+    folder.mkdir()
+    ReplayShard(fields, cfg.replay.seq_len, shard_capacity(cfg.replay, fields)).save(str(folder / "shard0.npz"))
+    (folder / "limiter.json").write_text('{"inserted": 0, "sampled": 0}')
+    return folder
+
+
+def test_damaged_or_mismatched_replay_in_a_checkpoint_is_one_line_before_ray(tmp_path, capsys):
+    run_dir = _muzero_run(tmp_path)
+    folder = _with_replay(run_dir)
+    before = sorted(p.name for p in run_dir.iterdir())
+    for argv_tail, expect in ((["--set", "replay.shards=2"], "replay.shards=2"),
+                              (["--set", "replay.capacity_steps=5000"], "cannot change on resume")):
+        assert expect in _one_line_exit_2(capsys, ["train", "--resume", str(run_dir), *argv_tail])
+    shard = folder / "shard0.npz"
+    shard.write_bytes(shard.read_bytes()[:200])  # cut short: a full disk, a killed copy
+    assert "cannot be read" in _one_line_exit_2(capsys, ["train", "--resume", str(run_dir)])
+    (folder / "limiter.json").write_text("[1, 2")
+    assert "cannot be read" in _one_line_exit_2(capsys, ["train", "--resume", str(run_dir)])
+    assert sorted(p.name for p in run_dir.iterdir()) == before  # nothing written: no log, no metrics
+
+
 def test_half_written_checkpoints_are_cleaned_up(tmp_path):
     w = {"w": np.zeros((2, 2), np.float32)}
     save_checkpoint(tmp_path, {"w": w["w"]}, w, 1, {"updates": 1, "env_steps": 1}, None, keep=2)

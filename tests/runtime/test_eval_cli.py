@@ -1,6 +1,7 @@
 """`wmdist eval RUN_DIR` plays greedy episodes from a run's latest checkpoint (no Ray needed)."""
 from __future__ import annotations
 
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -39,6 +40,23 @@ def test_eval_of_a_folder_without_checkpoint_is_one_line(tmp_path, capsys):
     assert main(["eval", str(tmp_path)]) == 2
     err = capsys.readouterr().err
     assert "not a wmdist run directory" in err and err.count("\n") == 1
+
+
+def test_eval_of_a_damaged_checkpoint_is_one_line_naming_the_older_one(tmp_path, capsys):
+    w = np.zeros((4, 2), np.float32)
+    run_dir = _run_dir(tmp_path, w)
+    save_checkpoint(run_dir, {"w": w}, {"w": w}, 9, {"updates": 5, "env_steps": 200}, None, keep=2)
+    older, newer = sorted((run_dir / "checkpoints").iterdir())
+    (newer / "weights.npz").write_bytes(b"PK\x03\x04 cut short by a full disk")
+    assert main(["eval", str(run_dir), "--episodes", "1"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "cannot be read" in err and older.name in err, err
+    (newer / "weights.npz").unlink()
+    (newer / "counters.json").write_text('{"version": ')  # the counters, too, are read by eval
+    assert main(["eval", str(run_dir), "--episodes", "1"]) == 2
+    assert "cannot be read" in capsys.readouterr().err
+    shutil.rmtree(newer)  # the fall-back the line suggests works
+    assert main(["eval", str(run_dir), "--episodes", "1"]) == 0
 
 
 def test_board_bench_plays_the_solver_and_plots_losses(tmp_path, capsys):

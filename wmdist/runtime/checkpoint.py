@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import shutil
+import warnings
 from pathlib import Path
 from typing import Any
 
@@ -74,12 +75,27 @@ def latest_checkpoint(run_dir: str | Path) -> Path | None:
     return ckpts[-1] if ckpts else None
 
 
+def unreadable_message(ckpt: Path, err: BaseException) -> str:
+    """One line for a checkpoint that fails to load, naming the older one a user can fall back to
+    (checkpoints are renamed into place whole, so damage means the disk or a hand edit)."""
+    lines = [ln.strip() for ln in str(err).strip().splitlines() if ln.strip()]
+    why = (lines[0] if lines else type(err).__name__)[:300]
+    older = [p for p in list_checkpoints(ckpt.parent.parent) if p.name < ckpt.name]
+    hint = (f"; move it aside to use the previous one, {older[-1].name}" if older
+            else "; there is no older checkpoint to fall back to")
+    return f"{ckpt} cannot be read ({why}){hint}"
+
+
 def load_counters(ckpt: Path) -> dict:
     return json.loads((ckpt / "counters.json").read_text())
 
 
 def load_learner_state(ckpt: Path) -> dict:
-    return torch.load(ckpt / "learner.pt", weights_only=True, map_location="cpu")
+    with warnings.catch_warnings():
+        # a damaged or foreign file warns about its pickle protocol before it fails: the failure is
+        # reported as one line by the caller, and the warning would only add noise around it
+        warnings.filterwarnings("ignore", message="Detected pickle protocol")
+        return torch.load(ckpt / "learner.pt", weights_only=True, map_location="cpu")
 
 
 def load_weights(ckpt: Path) -> tuple[int, dict[str, np.ndarray]]:

@@ -24,7 +24,10 @@ def load_run(run_dir: str):
         raise ConfigError(f"{run_dir} has no checkpoint yet")
     spec = env_spec_or_error(cfg)
     algo = build_algorithm(cfg, spec, cfg.run.seed + 31_337)
-    version, weights = ck.load_weights(ckpt)
+    try:
+        version, weights = ck.load_weights(ckpt)
+    except Exception as err:  # noqa: BLE001 - a damaged or hand-edited file: one line, not a traceback
+        raise ConfigError(ck.unreadable_message(ckpt, err)) from None
     return cfg, spec, algo, version, weights, ckpt
 
 

@@ -146,13 +146,50 @@ def check_checkpoint(run_dir: Path, ckpt: Path, cfg: RunConfig, algo: Any) -> di
         state = ck.load_learner_state(ckpt)
         ck.load_counters(ckpt)
     except Exception as err:  # noqa: BLE001 - unreadable or crafted files: one line
-        raise ConfigError(f"{ckpt} cannot be read ({_first_line(err)})") from None
+        raise ConfigError(ck.unreadable_message(ckpt, err)) from None
     try:
         algo.make_learner("cpu").load_state_dict(state["learner"])
     except Exception as err:  # noqa: BLE001 - size mismatch, missing keys, another algorithm
         raise ConfigError(f"{ckpt} does not fit the model this config builds ({_first_line(err)}); "
                           f"overrides that change the model's shape cannot resume a run") from None
     return state
+
+
+def check_replay_checkpoint(ckpt: Path, cfg: RunConfig, fields: dict) -> None:
+    """The checkpoint's replay files open (never unpickled) and fit the shards `cfg` builds, so a
+    truncated file or a changed `replay.shards` / `capacity_steps` / `seq_len` fails here in one
+    line instead of after Ray has started. Reads only each file's index and scalars."""
+    import json
+
+    import numpy as np
+
+    from wmdist.runtime import checkpoint as ck
+    from wmdist.runtime.replay_client import shard_capacity
+
+    folder = ckpt / "replay"
+    if not folder.exists():
+        return
+    saved = sorted(folder.glob("shard*.npz"))
+    try:
+        state = json.loads((folder / "limiter.json").read_text(encoding="utf-8"))
+        if not isinstance(state, dict):
+            raise ValueError("limiter.json is not a limiter state")
+        shapes = []
+        for path in saved:
+            with np.load(path, allow_pickle=False) as z:
+                scalars = json.loads(bytes(z["scalars"]).decode())
+                shapes.append((int(scalars["capacity"]), int(scalars["seq_len"])))
+    except Exception as err:  # noqa: BLE001 - truncated, hand-edited or crafted files: one line
+        raise ConfigError(ck.unreadable_message(ckpt, err)) from None
+    if len(saved) != cfg.replay.shards:
+        raise ConfigError(f"{ckpt} holds {len(saved)} replay shard(s), this config builds replay.shards="
+                          f"{cfg.replay.shards}; resume with the run's own shard count")
+    want = (shard_capacity(cfg.replay, fields), cfg.replay.seq_len)
+    for path, have in zip(saved, shapes):
+        if have != want:
+            raise ConfigError(f"{path} holds {have[0]} sequence slots of length {have[1]}, this config builds "
+                              f"{want[0]} of length {want[1]}; replay.capacity_steps and replay.seq_len "
+                              f"cannot change on resume")
 
 
 def _first_line(err: BaseException) -> str:

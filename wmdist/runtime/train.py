@@ -117,6 +117,7 @@ def _prepare(cfg: RunConfig | None, resume: str | None, overrides: list[str] | N
     fields = algo.step_fields()
     if ckpt is not None:
         state = pf.check_checkpoint(Path(resume), ckpt, cfg, algo)
+        pf.check_replay_checkpoint(ckpt, cfg, fields)
     del algo
     pf.check_resources(cfg)
     pf.check_replay_store(cfg)
