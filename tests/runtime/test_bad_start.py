@@ -83,6 +83,21 @@ def test_unreachable_redis_is_one_line(tmp_path, capsys, url, message):
     assert not any(tmp_path.iterdir())
 
 
+@pytest.mark.parametrize("address, message", [
+    ("headnode", "expected 'auto', HOST:PORT"),
+    ("127.0.0.1:{closed}", "nothing answers there"),
+    ("ray://127.0.0.1:{closed}", "nothing answers there"),
+])
+def test_unreachable_ray_address_is_one_line_before_anything_starts(tmp_path, capsys, address, message):
+    with socket.socket() as s:  # a port that was free a moment ago: no head listens there
+        s.bind(("127.0.0.1", 0))
+        closed = s.getsockname()[1]
+    line = _one_line_exit_2(capsys, ["train", FAKE, "--set", f"run.dir={tmp_path}",
+                                     f"ray.address={address.format(closed=closed)}"])
+    assert message in line
+    assert not any(tmp_path.iterdir()), "a run directory was created"
+
+
 def test_redis_password_problems_are_one_line(tmp_path, capsys):
     from wmdist.replay.redis_server import RedisServer
 

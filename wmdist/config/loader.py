@@ -43,7 +43,8 @@ def parse_yaml(text: str) -> Any:
     return yaml.load(text, Loader=_Loader)
 
 
-def _read_yaml(path: Path) -> dict:
+def read_yaml_mapping(path: Path) -> dict:
+    """A YAML file's top-level mapping; a missing file, bad YAML or another top level is one ConfigError line."""
     if not path.is_file():
         raise ConfigError(f"config file not found: {path}")
     try:
@@ -70,7 +71,7 @@ def load_yaml_tree(path: str | os.PathLike, depth: int = 0) -> dict:
     path = Path(path)
     if depth > MAX_DEFAULTS_DEPTH:
         raise ConfigError(f"{path}: defaults nest deeper than {MAX_DEFAULTS_DEPTH} (a cycle?)")
-    data = _read_yaml(path)
+    data = read_yaml_mapping(path)
     defaults = data.pop("defaults", []) or []
     if isinstance(defaults, str):
         defaults = [defaults]

@@ -60,6 +60,30 @@ def check_resources(cfg: RunConfig) -> None:
     check_fits(cfg, cluster)
 
 
+RAY_CHECK_TIMEOUT = 3.0  # seconds for a cluster's head to accept a TCP connection
+
+
+def check_ray_address(cfg: RunConfig) -> None:
+    """A HOST:PORT (or ray://HOST:PORT) to join must accept a connection before anything is created:
+    a typo or a head that is down is bad input, not a failed run. 'auto' is left to Ray."""
+    import socket
+
+    address = cfg.ray.address
+    if not address or address == "auto" or cfg.ray.local:
+        return
+    hostport = address.split("://", 1)[1] if "://" in address else address
+    host, _, port = hostport.rpartition(":")
+    if not host or not port.isdigit():
+        raise ConfigError(f"ray.address {address!r}: expected 'auto', HOST:PORT or ray://HOST:PORT "
+                          f"(the head's GCS port, 6379 by default)")
+    try:
+        with socket.create_connection((host.strip("[]"), int(port)), timeout=RAY_CHECK_TIMEOUT):
+            pass
+    except OSError as err:
+        raise ConfigError(f"ray.address {address}: nothing answers there ({err.strerror or err}); start the "
+                          f"head with `ray start --head`, or leave ray.address empty for a local instance") from None
+
+
 def _gpus(cfg: RunConfig) -> int:
     if cfg.ray.num_gpus >= 0:
         return cfg.ray.num_gpus

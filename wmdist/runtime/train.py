@@ -40,12 +40,12 @@ def new_run_dir(cfg: RunConfig) -> Path:
 
 def load_run_config(run_dir: str | Path, overrides: list[str] | None = None) -> RunConfig:
     """The resolved config saved in a run directory (plus optional overrides)."""
-    from wmdist.config.loader import apply_overrides, parse_yaml
+    from wmdist.config.loader import apply_overrides, read_yaml_mapping
 
     path = Path(run_dir) / CONFIG_FILE
     if not path.is_file():
         raise ConfigError(f"{run_dir} is not a wmdist run directory (no {CONFIG_FILE})")
-    tree = parse_yaml(path.read_text()) or {}
+    tree = read_yaml_mapping(path)  # a damaged config.yaml is one line, like any config file
     return config_from_tree(apply_overrides(tree, list(overrides or [])), default_name=Path(run_dir).name)
 
 
@@ -120,6 +120,7 @@ def _prepare(cfg: RunConfig | None, resume: str | None, overrides: list[str] | N
         pf.check_replay_checkpoint(ckpt, cfg, fields)
     del algo
     pf.check_resources(cfg)
+    pf.check_ray_address(cfg)
     pf.check_replay_store(cfg)
     hub = pf.start_metrics(cfg)
     return cfg, spec, fields, ckpt, state, hub
