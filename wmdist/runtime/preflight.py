@@ -1,10 +1,10 @@
 """Every check `wmdist train` can make before Ray starts or a run directory exists.
 
 Each failure is one `ConfigError` line (exit status 2) and leaves nothing behind: the env
-builds, the algorithm builds, the roles fit the embedded instance, the replay store is
-reachable with its password, the metrics port is free (it is bound here, and kept), the run
-directory can be created, and a checkpoint to resume loads into the model the config
-describes.
+builds, the algorithm builds, the roles fit the embedded instance, a cluster to join answers
+at ray.address, the replay store is reachable with its password, the metrics port is free (it
+is bound here, and kept), the run directory can be created, and a checkpoint to resume loads
+into the model the config describes, its replay files included.
 """
 from __future__ import annotations
 
