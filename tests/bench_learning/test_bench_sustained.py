@@ -4,12 +4,15 @@ from __future__ import annotations
 
 import json
 import subprocess
+from pathlib import Path
 
 import pytest
 
 from wmdist.bench import compare, learning
 from wmdist.bench.learning import cpu_info, first_reaching, sustained
 from wmdist.telemetry.curves import write_jsonl
+
+PRESET = str(Path(__file__).resolve().parents[2] / "configs" / "dreamerv3_cartpole.yaml")  # checked, never run
 
 
 def _jsonl(path, evals: list[tuple[int, float]]):
@@ -90,7 +93,7 @@ def test_learning_main_reports_sustained_figures_at_the_budget(tmp_path, monkeyp
 
     monkeypatch.setattr(learning.subprocess, "run", fake_train)
     png = tmp_path / "l.png"
-    assert learning.main(["cfg/preset.yaml", "--seeds", "0", "1", "--target", "475", "--png", str(png),
+    assert learning.main([PRESET, "--seeds", "0", "1", "--target", "475", "--png", str(png),
                           "--runs-dir", str(tmp_path / "runs"), "--budget-env-steps", "4000",
                           "--budget-minutes", "1"]) == 0
     rows = [json.loads(x) for x in capsys.readouterr().out.strip().splitlines()]
@@ -104,6 +107,18 @@ def test_learning_main_reports_sustained_figures_at_the_budget(tmp_path, monkeyp
     assert summary["met"] == "1/2" and summary["reached"] == "2/2"
     assert summary["max_sustained_from_env_steps"] == 4000
     assert png.stat().st_size > 1000
+
+
+def test_compare_refuses_groups_it_cannot_plot(tmp_path, capsys):
+    _curve(tmp_path / "ok" / "preset-seed0-20261122-000000" / "metrics.jsonl", [100, 500])
+    (tmp_path / "empty").mkdir()
+    png = tmp_path / "cmp.png"
+    for bad, says in (("nolabel", "expected GROUP=DIR"), (f"x={tmp_path / 'missing'}", "is not a folder"),
+                      (f"x={tmp_path / 'empty'}", "holds no run folders")):
+        assert compare.main(["--target", "1", "--png", str(png), f"ok={tmp_path / 'ok'}", bad]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and says in err[0], err
+    assert not png.exists()  # nothing half-plotted
 
 
 def test_band_interpolates_each_seed_only_inside_its_span():

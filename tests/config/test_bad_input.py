@@ -51,9 +51,21 @@ def test_every_set_flag_counts_in_the_learning_bench(tmp_path, monkeypatch, caps
         return subprocess.CompletedProcess(cmd, 1, "", "failed")
 
     monkeypatch.setattr(learning.subprocess, "run", fake_run)
-    learning.main(["c.yaml", "--seeds", "0", "--target", "1", "--png", str(tmp_path / "c.png"),
-                   "--runs-dir", str(tmp_path), "--set", "a=1", "--set", "b=2"])
-    assert cmds and cmds[0][-2:] == ["a=1", "b=2"]
+    learning.main([MUZERO, "--seeds", "0", "--target", "1", "--png", str(tmp_path / "c.png"),
+                   "--runs-dir", str(tmp_path), "--set", "learner.batch_size=4", "--set", "actors.num=1"])
+    assert cmds and cmds[0][-2:] == ["learner.batch_size=4", "actors.num=1"]
+
+
+def test_learning_bench_refuses_a_bad_config_before_any_run(tmp_path, monkeypatch, capsys):
+    from wmdist.bench import learning
+
+    monkeypatch.setattr(learning.subprocess, "run", lambda *a, **k: pytest.fail("a run was started"))
+    for argv in ([MUZERO, "--set", "algo.horizon=-1"], ["missing.yaml"], [MUZERO, "--seeds", "-1"]):
+        assert learning.main([*argv, "--target", "1", "--png", str(tmp_path / "c.png"),
+                              "--runs-dir", str(tmp_path / "runs")]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and err[0].startswith("wmdist: error: "), err
+    assert not (tmp_path / "runs").exists() and not (tmp_path / "c.png").exists()
 
 
 # --- 2. numbers as people write them ---------------------------------------------------

@@ -33,6 +33,18 @@ def runs_in(folder: Path) -> dict[int, Path]:
     return out
 
 
+def group_problem(spec: str) -> str | None:
+    """Why a GROUP=DIR argument cannot be plotted, or None when it can."""
+    if "=" not in spec:
+        return f"expected GROUP=DIR, got {spec!r}"
+    folder = Path(spec.split("=", 1)[1])
+    if not folder.is_dir():
+        return f"{spec}: {folder} is not a folder"
+    if not runs_in(folder):
+        return f"{spec}: {folder} holds no run folders named <name>-seed<N>-<time> with a metrics.jsonl"
+    return None
+
+
 def band(curves: list[tuple[list[float], list[float]]]) -> tuple[list[float], list[float], list[float], list[float]]:
     """(grid, mean, min, max) of several (env steps, return) curves on a common grid: the
     union of their env steps, each curve interpolated linearly only inside its own span
@@ -83,6 +95,11 @@ def main(argv: list[str] | None = None) -> int:
                    help="the plot's x axis: env steps (default) or wall-clock minutes")
     a = p.parse_args(argv)
     budget_seconds = a.budget_minutes * 60 if a.budget_minutes is not None else None
+    for spec in a.groups:  # every group is checked before anything is plotted: one line, exit 2
+        problem = group_problem(spec)
+        if problem:
+            print(f"wmdist: error: {problem}", file=sys.stderr)
+            return 2
     import matplotlib
 
     matplotlib.use("Agg")
@@ -93,9 +110,6 @@ def main(argv: list[str] | None = None) -> int:
     styles = ("-", "--", ":", "-.")  # seeds of one group: one colour, told apart by line style
     markers = (".", "x", "+", "^")  # and, past four seeds, by marker
     for gi, spec in enumerate(a.groups):
-        if "=" not in spec:
-            print(f"wmdist: expected GROUP=DIR, got {spec!r}", file=sys.stderr)
-            return 2
         name, folder = spec.split("=", 1)
         results, curves = [], []
         colour = colours[gi % len(colours)]

@@ -149,6 +149,19 @@ def summary(config: str, seeds: list[int], results: list[dict], png: str) -> dic
             "png": png}
 
 
+def config_problem(config: str, overrides: list[str], seeds: list[int]) -> str | None:
+    """Why the runs this bench would start cannot start (the config with each seed), or None."""
+    from wmdist.config.errors import ConfigError
+    from wmdist.config.loader import load_config
+
+    try:
+        for seed in seeds:
+            load_config(config, [f"run.seed={seed}", f"replay.seed={seed}", *overrides])
+    except ConfigError as err:
+        return str(err)
+    return None
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("config")
@@ -166,6 +179,10 @@ def main(argv: list[str] | None = None) -> int:
         if kv.startswith("run.dir="):
             a.runs_dir = kv.split("=", 1)[1]
     budget_seconds = a.budget_minutes * 60 if a.budget_minutes is not None else None
+    problem = config_problem(a.config, a.set, a.seeds)
+    if problem:  # a bad config would fail every seed in turn: one line, exit 2, before any run
+        print(f"wmdist: error: {problem}", file=sys.stderr)
+        return 2
     cpu = cpu_info()
     runs: dict[int, Path] = {}
     results = []
