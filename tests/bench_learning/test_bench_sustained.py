@@ -121,6 +121,28 @@ def test_compare_refuses_groups_it_cannot_plot(tmp_path, capsys):
     assert not png.exists()  # nothing half-plotted
 
 
+def test_learning_bench_reports_progress_while_a_seed_trains(tmp_path, monkeypatch, capsys):
+    import time
+
+    old = tmp_path / "runs" / "dreamerv3_cartpole-seed0-20250101-000000"  # an earlier run of the seed
+    _curve(old / "metrics.jsonl", [999])
+
+    def slow_train(cmd, **kw):  # a run that has logged two evals and is still going
+        sets = dict(x.split("=", 1) for x in cmd if "=" in x)
+        _curve(tmp_path / "runs" / f"{sets['run.name']}-20260101-000000" / "metrics.jsonl", [120, 240])
+        time.sleep(0.6)
+        return subprocess.CompletedProcess(cmd, 0, "", "")
+
+    monkeypatch.setattr(learning.subprocess, "run", slow_train)
+    assert learning.main([PRESET, "--seeds", "0", "--target", "475", "--png", str(tmp_path / "l.png"),
+                          "--runs-dir", str(tmp_path / "runs"), "--progress-seconds", "0.1"]) == 0
+    captured = capsys.readouterr()
+    lines = [ln for ln in captured.err.splitlines() if ln.startswith("wmdist: seed 0: ")]
+    assert lines and "2,000 env steps" in lines[-1] and "last eval 240.0" in lines[-1], captured.err
+    assert "999" not in captured.err  # the older run's figures are not this run's
+    assert all(ln.startswith("{") for ln in captured.out.strip().splitlines())  # stdout: JSON lines only
+
+
 def test_band_interpolates_each_seed_only_inside_its_span():
     grid, mean, lo, hi = compare.band([([0, 2000], [0.0, 200.0]), ([1000, 4000], [300.0, 600.0])])
     assert grid == [0, 1000, 2000, 4000]

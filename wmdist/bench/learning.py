@@ -9,6 +9,8 @@ A run is judged on the mean of its last three evaluations at the budget (`last3_
 `met`), and `sustained_from_env_steps` is the first env step from which that three-eval
 mean stays at or above the target to the end of the budget; the first crossing
 (`env_steps_to_target`, `reached`) is reported beside them. Each line also names the CPU.
+While a seed trains, a progress line (env steps, updates, minutes, last eval) goes to stderr
+every `--progress-seconds` (60). A bad config is refused in one line before any run starts.
 """
 from __future__ import annotations
 
@@ -16,8 +18,10 @@ import argparse
 import json
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
+from typing import IO
 
 from wmdist.telemetry.curves import read_jsonl
 
@@ -149,6 +153,54 @@ def summary(config: str, seeds: list[int], results: list[dict], png: str) -> dic
             "png": png}
 
 
+def progress_line(seed: int, run_dir: Path | None, started: float) -> str:
+    """What a running seed has done so far, read from its metrics.jsonl (torn lines skipped)."""
+    minutes = (time.monotonic() - started) / 60
+    last, last_eval = None, None
+    for rec in read_jsonl(run_dir / "metrics.jsonl") if run_dir is not None else ():
+        last = rec
+        if rec.get("kind") == "eval" and rec.get("eval_return") is not None:
+            last_eval = rec
+    if last is None:
+        return f"wmdist: seed {seed}: starting ({minutes:.1f} min)"
+    line = (f"wmdist: seed {seed}: {last.get('env_steps', 0):,} env steps, {last.get('updates', 0):,} updates, "
+            f"{minutes:.1f} min")
+    if last_eval is not None:
+        line += f", last eval {last_eval['eval_return']:.1f} at {last_eval.get('env_steps', 0):,} env steps"
+    return line
+
+
+class Progress:
+    """Prints `progress_line` for the seed now training every `every` seconds (stderr), so an
+    hour-long bench says where it is; stdout keeps only the JSON lines."""
+
+    def __init__(self, seed: int, runs_dir: Path, name: str, every: float, out: IO[str] | None = None) -> None:
+        self.seed, self.runs_dir, self.name, self.every = seed, runs_dir, name, every
+        self.out = out or sys.stderr
+        self.before = set(runs_dir.glob(f"{name}-*"))  # an older run of the same seed is not this one
+        self.started = time.monotonic()
+        self.stop = threading.Event()
+        self.thread = threading.Thread(target=self._loop, daemon=True)
+
+    def _run_dir(self) -> Path | None:
+        new = sorted(set(self.runs_dir.glob(f"{self.name}-*")) - self.before)
+        return new[-1] if new else None
+
+    def _loop(self) -> None:
+        while not self.stop.wait(self.every):
+            print(progress_line(self.seed, self._run_dir(), self.started), file=self.out, flush=True)
+
+    def __enter__(self) -> "Progress":
+        if self.every > 0:
+            self.thread.start()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.stop.set()
+        if self.thread.is_alive():
+            self.thread.join()
+
+
 def config_problem(config: str, overrides: list[str], seeds: list[int]) -> str | None:
     """Why the runs this bench would start cannot start (the config with each seed), or None."""
     from wmdist.config.errors import ConfigError
@@ -174,6 +226,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--budget-minutes", type=float, default=None,
                    help="judge each run on its evals up to this much run time (default: all)")
     p.add_argument("--set", action="extend", nargs="*", default=[])  # every `--set` counts, not the last
+    p.add_argument("--progress-seconds", type=float, default=60.0,
+                   help="print the running seed's env steps and last eval to stderr this often (0: never)")
     a = p.parse_args(argv)
     for kv in a.set:  # `--set run.dir=X` would move the runs away from where they are looked for
         if kv.startswith("run.dir="):
@@ -191,7 +245,8 @@ def main(argv: list[str] | None = None) -> int:
         t0 = time.monotonic()
         cmd = [sys.executable, "-m", "wmdist.cli", "train", a.config, "--set", f"run.seed={seed}",
                f"run.name={name}", f"run.dir={a.runs_dir}", "replay.seed=" + str(seed), *a.set]
-        proc = subprocess.run(cmd, capture_output=True, text=True)
+        with Progress(seed, Path(a.runs_dir), name, a.progress_seconds):
+            proc = subprocess.run(cmd, capture_output=True, text=True)
         wall = time.monotonic() - t0
         run_dirs = sorted(Path(a.runs_dir).glob(f"{name}-*"))
         if proc.returncode != 0 or not run_dirs:
