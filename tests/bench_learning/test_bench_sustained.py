@@ -143,6 +143,21 @@ def test_learning_bench_reports_progress_while_a_seed_trains(tmp_path, monkeypat
     assert all(ln.startswith("{") for ln in captured.out.strip().splitlines())  # stdout: JSON lines only
 
 
+def test_a_seed_that_fails_after_start_up_is_reported_with_its_error_and_not_met(tmp_path, monkeypatch, capsys):
+    def crashing_train(cmd, **kw):  # logged three evals at the target, then died
+        sets = dict(x.split("=", 1) for x in cmd if "=" in x)
+        _curve(tmp_path / "runs" / f"{sets['run.name']}-20260101-000000" / "metrics.jsonl", [500, 500, 500])
+        return subprocess.CompletedProcess(cmd, 1, "", "wmdist: error while training: boom; resume with ...")
+
+    monkeypatch.setattr(learning.subprocess, "run", crashing_train)
+    assert learning.main([PRESET, "--seeds", "3", "--target", "475", "--png", str(tmp_path / "l.png"),
+                          "--runs-dir", str(tmp_path / "runs"), "--progress-seconds", "0"]) == 0
+    rows = [json.loads(x) for x in capsys.readouterr().out.strip().splitlines()]
+    assert rows[0]["seed"] == 3 and "boom" in rows[0]["error"][0] and rows[0]["last3_mean"] == 500
+    assert rows[0]["met"] is False and rows[-1]["met"] == "0/1"
+    assert (tmp_path / "l.png").exists()  # its curve is drawn with the others
+
+
 def test_band_interpolates_each_seed_only_inside_its_span():
     grid, mean, lo, hi = compare.band([([0, 2000], [0.0, 200.0]), ([1000, 4000], [300.0, 600.0])])
     assert grid == [0, 1000, 2000, 4000]

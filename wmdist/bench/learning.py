@@ -249,13 +249,17 @@ def main(argv: list[str] | None = None) -> int:
             proc = subprocess.run(cmd, capture_output=True, text=True)
         wall = time.monotonic() - t0
         run_dirs = sorted(Path(a.runs_dir).glob(f"{name}-*"))
-        if proc.returncode != 0 or not run_dirs:
-            print(json.dumps({"seed": seed, "error": proc.stderr.strip().splitlines()[-1:]}), flush=True)
+        error = proc.stderr.strip().splitlines()[-1:] if proc.returncode != 0 else None
+        if not run_dirs or not (run_dirs[-1] / "metrics.jsonl").exists():
+            print(json.dumps({"seed": seed, "error": error or ["no run directory was written"]}), flush=True)
             continue
+        # a run that failed after start-up is still judged on what it logged, with its error beside it
         runs[seed] = run_dirs[-1] / "metrics.jsonl"
         res = {"config": a.config, "seed": seed, "target": a.target, "wall_seconds": round(wall, 1),
                "run_dir": str(run_dirs[-1]), **sustained(runs[seed], a.target, a.budget_env_steps, budget_seconds),
                **cpu}
+        if error:  # it stopped before its budget: never counted as met, whatever it logged
+            res.update(error=error, met=False)
         results.append(res)
         print(json.dumps(res), flush=True)
     if runs:
