@@ -36,6 +36,20 @@ def test_eval_prints_greedy_returns_of_the_checkpoint(tmp_path, capsys):
     assert returns["good"] > 3 * returns["bad"], returns
 
 
+def test_eval_reports_progress_on_stderr(tmp_path, capsys):
+    from wmdist.runtime.evaluate import evaluate_run
+
+    good = np.array([[0, 0], [0, 0], [-1, 1], [-1, 1]], np.float32)
+    run_dir = _run_dir(tmp_path, good)
+    assert evaluate_run(str(run_dir), episodes=4, progress_seconds=0.0) == 0
+    captured = capsys.readouterr()
+    lines = [ln for ln in captured.err.splitlines() if ln.startswith("wmdist: eval: ")]
+    assert [ln.split()[2] for ln in lines] == ["1/4", "2/4", "3/4", "4/4"], captured.err
+    mean = float(captured.out.split("mean return ")[1].split()[0])
+    assert lines[-1].endswith(f"mean return {mean:.2f}")  # the last progress line is the result
+    assert "wmdist: eval:" not in captured.out  # stdout keeps the result lines only
+
+
 def test_eval_of_a_folder_without_checkpoint_is_one_line(tmp_path, capsys):
     assert main(["eval", str(tmp_path)]) == 2
     err = capsys.readouterr().err

@@ -4,6 +4,7 @@ world model's open-loop prediction video."""
 from __future__ import annotations
 
 import sys
+import time
 from pathlib import Path
 from typing import IO, Callable
 
@@ -45,8 +46,22 @@ def _human(env, out: IO[str]) -> Callable[[object], int]:
     return ask
 
 
+def episode_progress(episodes: int, every_seconds: float, err: IO[str]) -> Callable[[list[float]], None]:
+    """An `on_episode` callback that prints 'N/M episodes, mean R' to `err` at most every `every_seconds`
+    (and at the last episode), so a 100-episode evaluation of a long game says where it is."""
+    last = [time.monotonic()]
+
+    def report(returns: list[float]) -> None:
+        now = time.monotonic()
+        if now - last[0] >= every_seconds or len(returns) == episodes:
+            last[0] = now
+            print(f"wmdist: eval: {len(returns)}/{episodes} episodes, mean return {np.mean(returns):.2f}",
+                  file=err, flush=True)
+    return report
+
+
 def evaluate_run(run_dir: str, episodes: int = 10, video: str | None = None, human: bool = False,
-                 out: IO[str] | None = None) -> int:
+                 out: IO[str] | None = None, progress_seconds: float = 10.0) -> int:
     out = out or sys.stdout  # looked up per call: a default bound at import outlives a redirected stdout
     cfg, spec, algo, version, weights, ckpt = load_run(run_dir)
     policy = algo.make_policy("cpu")
@@ -69,7 +84,8 @@ def evaluate_run(run_dir: str, episodes: int = 10, video: str | None = None, hum
     from wmdist.runtime.roles.evaluator import play_episodes
 
     venv = make_vector_env(cfg.env, min(episodes, cfg.eval.envs), cfg.run.seed + 5)
-    returns, lengths = play_episodes(policy, venv, episodes)
+    returns, lengths = play_episodes(policy, venv, episodes,
+                                     on_episode=episode_progress(episodes, progress_seconds, sys.stderr))
     print("returns: " + " ".join(f"{r:.1f}" for r in returns), file=out)
     print(f"mean return {np.mean(returns):.2f} +- {np.std(returns):.2f} over {len(returns)} episodes "
           f"(mean length {np.mean(lengths):.0f})", file=out)

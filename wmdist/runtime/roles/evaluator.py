@@ -2,7 +2,7 @@
 from __future__ import annotations
 
 import time
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 
@@ -14,11 +14,13 @@ from wmdist.runtime.roles.weights import pull
 
 
 def play_episodes(policy: Policy, venv: Any, episodes: int, explore: bool = False,
-                  max_steps: int = 1_000_000) -> tuple[list[float], list[int]]:
+                  max_steps: int = 1_000_000,
+                  on_episode: Callable[[list[float]], None] | None = None) -> tuple[list[float], list[int]]:
     """Run `episodes` episodes over a VectorEnv (greedy unless explore); returns returns and lengths.
 
     Each env has a fixed quota of episodes (an even split), so short episodes are not
-    over-represented the way "first N to finish" would.
+    over-represented the way "first N to finish" would. `on_episode(returns so far)` is
+    called as each counted episode ends (progress for long evaluations).
     """
     E = venv.num_envs
     quota = np.array([episodes // E + (i < episodes % E) for i in range(E)])
@@ -40,6 +42,8 @@ def play_episodes(policy: Policy, venv: Any, episodes: int, explore: bool = Fals
                 returns.append(float(ret[i]))
                 lengths.append(int(length[i]))
                 done_count[i] += 1
+                if on_episode is not None:
+                    on_episode(returns)
             ret[i], length[i] = 0.0, 0
     return returns, lengths
 
