@@ -149,3 +149,33 @@ def test_imag_starts_draws_that_many_distinct_real_states():
     match = (key(some)[:, None, :] == key(every)[None, :, :]).all(-1)  # [7, 15]
     assert (match.sum(1) == 1).all() and (match.sum(0) <= 1).all()
     assert more.deter.shape[0] == 15  # more starts than real states: all of them
+
+
+def test_actor_lambda_changes_the_actors_returns_only(monkeypatch):
+    """`actor_lam` feeds the actor's advantage a second lambda-return; the critic's targets stay at `lam`."""
+    from wmdist.algos.dreamer import imagine as imagine_mod
+
+    spec = bench_spec(True)
+    learner = Dreamer(spec, tiny_config(3, actor_entropy=0.0, return_norm="none")).make_learner()
+    t = learner._tensors(random_batch(spec, 3, 6))
+    _, _, start = learner.world_model_loss(t)
+    g0 = learner.generator.get_state()
+    calls = []
+    real = imagine_mod.lambda_returns
+    monkeypatch.setattr(imagine_mod, "lambda_returns",
+                        lambda r, c, v, lam: calls.append((lam, r, c, v)) or real(r, c, v, lam))
+
+    def losses(actor_lam):
+        learner.cfg.actor_lam = actor_lam
+        learner.generator.set_state(g0)  # the same imagined actions each time
+        calls.clear()
+        actor, critic, _ = learner.ac_loss(start, learner.generator)
+        return float(actor), float(critic), [c[0] for c in calls]
+
+    base_actor, base_critic, lams = losses(None)
+    assert lams == [0.95]
+    assert losses(0.95)[:3] == (base_actor, base_critic, [0.95])  # the same lambda: nothing recomputed
+    td_actor, td_critic, lams = losses(0.0)
+    assert lams == [0.95, 0.0] and td_critic == base_critic and td_actor != base_actor
+    lam, r, c, v = calls[1]
+    assert torch.allclose(real(r, c, v, 0.0), r + c * v[1:])  # lambda 0: the one-step TD target

@@ -89,6 +89,10 @@ class DreamerConfig:
     imag_starts: int = param(0, "imagine from at most this many posterior states, drawn at random from the batch (0 = all, as the papers)", ge=0)
     discount: float | None = param(None, "discount gamma (V3: 1 - 1/333)", gt=0, le=1)
     lam: float = param(0.95, "lambda of the lambda-returns", ge=0, le=1)
+    # not in the papers (one lambda for both): a lower one gives the actor an advantage with less of the
+    # sampled future actions' variance in it, trusting the critic instead
+    actor_lam: float | None = param(None, "lambda of the returns in the actor's advantage (None = lam; the "
+                                    "critic always regresses lam-returns)", ge=0, le=1)
     actor_grad_disc: str | None = param(None, "actor gradient for discrete actions", choices=("reinforce", "backprop"))
     actor_grad_cont: str | None = param(None, "actor gradient for continuous actions", choices=("reinforce", "backprop"))
     actor_entropy: float | None = param(None, "actor entropy bonus (V3: 3e-4)", ge=0)

@@ -139,17 +139,20 @@ class ActorCriticLoss:
             else:
                 value_ret = value.detach()
             disc = cfg.discount * cont  # [H, N]
-            returns = lambda_returns(reward, disc, value_ret, cfg.lam)  # [H, N]
+            returns = lambda_returns(reward, disc, value_ret, cfg.lam)  # [H, N] the critic's targets
+            actor_returns = returns  # [H, N] the returns in the actor's advantage
+            if cfg.actor_lam is not None and cfg.actor_lam != cfg.lam:
+                actor_returns = lambda_returns(reward, disc, value_ret, cfg.actor_lam)
             # weight of step t: start cont times prod_{i<=t} gamma c_i (no credit after a predicted end)
             weight = torch.cat([torch.ones_like(disc[:1]), disc[:-1]]).cumprod(0) * start.cont  # [H, N]
             weight = weight.detach()
             if cfg.return_norm == "percentile":
-                self.norm.update(returns)
+                self.norm.update(actor_returns)
                 scale = self.norm.scale
             else:
                 scale = 1.0
             base = value_ret[:-1].detach()
-            adv = (returns - base) / scale  # DreamerV3 eq. 11: normalised advantage
+            adv = (actor_returns - base) / scale  # DreamerV3 eq. 11: normalised advantage
             if self.backprop:
                 pg = -adv
             else:
