@@ -13,3 +13,10 @@ def closest(word: str, options: Iterable[str]) -> str:
     """' (did you mean 'x'?)' for the closest option, or '' when none is close."""
     match = difflib.get_close_matches(word, list(options), n=1, cutoff=0.5)
     return f" (did you mean '{match[0]}'?)" if match else ""
+
+
+def first_line(err: BaseException) -> str:
+    """The first non-blank line of an exception's message (its type name when it has none), for
+    one-line errors built from exceptions whose text may span many lines."""
+    lines = [ln.strip() for ln in str(err).strip().splitlines() if ln.strip()]
+    return (lines[0] if lines else type(err).__name__)[:300]

@@ -23,6 +23,7 @@ from __future__ import annotations
 import json
 import os
 import threading
+from typing import Any
 
 import numpy as np
 
@@ -370,7 +371,7 @@ class ReplayShard:
     def restore(self, path: str) -> None:
         """Load what `save` wrote (never unpickles). Durable storage re-reads redis instead."""
         with self.lock, np.load(path, allow_pickle=False) as z:
-            scalars = json.loads(bytes(z["scalars"]).decode())
+            scalars = _scalars(z)
             if scalars["capacity"] != self.capacity or scalars["seq_len"] != self.T:
                 raise ValueError(f"replay checkpoint {path} has capacity {scalars['capacity']} / seq_len "
                                  f"{scalars['seq_len']}, this shard {self.capacity} / {self.T}")
@@ -389,3 +390,15 @@ class ReplayShard:
 
     def close(self) -> None:
         self.storage.close()
+
+
+def _scalars(z: Any) -> dict:
+    """The JSON scalars `ReplayShard.save` stores beside the arrays of an open .npz."""
+    return json.loads(bytes(z["scalars"]).decode())
+
+
+def saved_layout(path: str | os.PathLike) -> tuple[int, int]:
+    """(capacity in sequence slots, seq_len) of a shard file `save` wrote, read without its arrays."""
+    with np.load(path, allow_pickle=False) as z:
+        scalars = _scalars(z)
+    return int(scalars["capacity"]), int(scalars["seq_len"])

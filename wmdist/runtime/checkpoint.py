@@ -16,6 +16,8 @@ from typing import Any
 import numpy as np
 import torch
 
+from wmdist.config.errors import first_line
+
 CKPT_DIR = "checkpoints"
 
 
@@ -78,12 +80,10 @@ def latest_checkpoint(run_dir: str | Path) -> Path | None:
 def unreadable_message(ckpt: Path, err: BaseException) -> str:
     """One line for a checkpoint that fails to load, naming the older one a user can fall back to
     (checkpoints are renamed into place whole, so damage means the disk or a hand edit)."""
-    lines = [ln.strip() for ln in str(err).strip().splitlines() if ln.strip()]
-    why = (lines[0] if lines else type(err).__name__)[:300]
     older = [p for p in list_checkpoints(ckpt.parent.parent) if p.name < ckpt.name]
     hint = (f"; move it aside to use the previous one, {older[-1].name}" if older
             else "; there is no older checkpoint to fall back to")
-    return f"{ckpt} cannot be read ({why}){hint}"
+    return f"{ckpt} cannot be read ({first_line(err)}){hint}"
 
 
 def load_counters(ckpt: Path) -> dict:

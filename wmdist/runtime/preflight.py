@@ -14,7 +14,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from wmdist.config.errors import ConfigError
+from wmdist.config.errors import ConfigError, first_line
 from wmdist.config.schema import RunConfig
 from wmdist.envs.spec import EnvSpec
 
@@ -42,7 +42,7 @@ def check_env_and_algo(cfg: RunConfig) -> tuple[EnvSpec, Any]:
         algo = build_algorithm(cfg, spec, cfg.run.seed)
         algo.check_run(cfg)
     except (ValueError, TypeError) as err:
-        raise ConfigError(_first_line(err)) from None
+        raise ConfigError(first_line(err)) from None
     return spec, algo
 
 
@@ -111,7 +111,7 @@ def check_replay_store(cfg: RunConfig) -> None:
     try:
         client = connect(r.redis_url, r.redis_password_file)
     except ValueError as err:  # scheme or URL syntax
-        raise ConfigError(_first_line(err)) from None
+        raise ConfigError(first_line(err)) from None
     except OSError as err:
         raise ConfigError(f"replay.redis_password_file {r.redis_password_file!r}: {err.strerror}") from None
     client.connection_pool.connection_kwargs.update(socket_timeout=REDIS_CHECK_TIMEOUT,
@@ -120,14 +120,14 @@ def check_replay_store(cfg: RunConfig) -> None:
         client.ping()
     except (redis.AuthenticationError, redis.ResponseError) as err:
         if not isinstance(err, redis.AuthenticationError) and "AUTH" not in str(err).upper():
-            raise ConfigError(f"replay.redis_url {r.redis_url}: {_first_line(err)}") from None
+            raise ConfigError(f"replay.redis_url {r.redis_url}: {first_line(err)}") from None
         if client.connection_pool.connection_kwargs.get("password") is None:
             raise ConfigError(f"replay.redis_url {r.redis_url}: the server wants a password "
                               f"(set replay.redis_password_file)") from None
         raise ConfigError(f"replay.redis_url {r.redis_url}: the password was refused "
                           f"(check replay.redis_password_file)") from None
     except (redis.ConnectionError, redis.TimeoutError) as err:
-        raise ConfigError(f"replay.redis_url {r.redis_url}: nothing answers there ({_first_line(err)})") from None
+        raise ConfigError(f"replay.redis_url {r.redis_url}: nothing answers there ({first_line(err)})") from None
     finally:
         client.close()
 
@@ -174,7 +174,7 @@ def check_checkpoint(run_dir: Path, ckpt: Path, cfg: RunConfig, algo: Any) -> di
     try:
         algo.make_learner("cpu").load_state_dict(state["learner"])
     except Exception as err:  # noqa: BLE001 - size mismatch, missing keys, another algorithm
-        raise ConfigError(f"{ckpt} does not fit the model this config builds ({_first_line(err)}); "
+        raise ConfigError(f"{ckpt} does not fit the model this config builds ({first_line(err)}); "
                           f"overrides that change the model's shape cannot resume a run") from None
     return state
 
@@ -185,8 +185,7 @@ def check_replay_checkpoint(ckpt: Path, cfg: RunConfig, fields: dict) -> None:
     line instead of after Ray has started. Reads only each file's index and scalars."""
     import json
 
-    import numpy as np
-
+    from wmdist.replay.shard import saved_layout
     from wmdist.runtime import checkpoint as ck
     from wmdist.runtime.replay_client import shard_capacity
 
@@ -198,11 +197,7 @@ def check_replay_checkpoint(ckpt: Path, cfg: RunConfig, fields: dict) -> None:
         state = json.loads((folder / "limiter.json").read_text(encoding="utf-8"))
         if not isinstance(state, dict):
             raise ValueError("limiter.json is not a limiter state")
-        shapes = []
-        for path in saved:
-            with np.load(path, allow_pickle=False) as z:
-                scalars = json.loads(bytes(z["scalars"]).decode())
-                shapes.append((int(scalars["capacity"]), int(scalars["seq_len"])))
+        shapes = [saved_layout(path) for path in saved]
     except Exception as err:  # noqa: BLE001 - truncated, hand-edited or crafted files: one line
         raise ConfigError(ck.unreadable_message(ckpt, err)) from None
     if len(saved) != cfg.replay.shards:
@@ -214,8 +209,3 @@ def check_replay_checkpoint(ckpt: Path, cfg: RunConfig, fields: dict) -> None:
             raise ConfigError(f"{path} holds {have[0]} sequence slots of length {have[1]}, this config builds "
                               f"{want[0]} of length {want[1]}; replay.capacity_steps and replay.seq_len "
                               f"cannot change on resume")
-
-
-def _first_line(err: BaseException) -> str:
-    lines = [ln.strip() for ln in str(err).strip().splitlines() if ln.strip()]
-    return (lines[0] if lines else type(err).__name__)[:300]
