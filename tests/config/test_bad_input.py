@@ -267,3 +267,13 @@ def test_counts_below_one_are_refused_before_anything_loads(argv, capsys):
     assert ex.value.code == 2
     err = capsys.readouterr().err.strip().splitlines()[-1]
     assert "must be >= 1" in err
+
+
+# --- replay.pack_episodes needs a learner that restarts inside a window ------------------
+
+
+def test_packed_windows_are_refused_for_muzero(tmp_path, capsys):
+    code = main(["train", MUZERO, "--set", "replay.pack_episodes=true", f"run.dir={tmp_path}"])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and err.startswith("wmdist: error: replay.pack_episodes: muzero's learner") and "\n" not in err
+    assert not list(tmp_path.iterdir())

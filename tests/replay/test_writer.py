@@ -47,6 +47,52 @@ def test_episode_ending_on_window_boundary_and_new_episode_ids():
     assert b.episode_id[0] == b.episode_id[1] != b.episode_id[2]
 
 
+def _packed_reference(streams: list[list[int]], T: int, overlap: int) -> list[list[int]]:
+    """Slow reference: each env's steps end to end, cut into windows of T every T - overlap steps."""
+    out = []
+    for stream in streams:
+        start = 0
+        while start + T <= len(stream):
+            out.append(stream[start:start + T])
+            start += T - overlap
+    return out
+
+
+@pytest.mark.parametrize("overlap", [0, 2])
+def test_packed_windows_run_across_episode_ends(overlap):
+    """pack=True: an episode's end leaves its window open for the env's next episode, so
+    every window is T real steps (no padding), `last` stays inside it, and the windows are
+    exactly the env's step stream cut every T - overlap steps."""
+    rng = np.random.default_rng(0)
+    T, E, n = 5, 3, 40
+    w = SequenceWriter(FIELDS, seq_len=T, overlap=overlap, num_envs=E, pack=True)
+    streams: list[list[int]] = [[] for _ in range(E)]
+    for t in range(n):
+        last = (rng.random(E) < 0.3).tolist()  # episodes of 1-3 steps are common: most would be padding
+        w.add(_step(t, last))
+        for e in range(E):
+            streams[e].append(t)
+    b = w.pop()
+    assert b.mask.all()
+    got = sorted(b.data["obs"][..., 0].astype(int).tolist())
+    assert got == sorted(_packed_reference(streams, T, overlap))
+    assert b.data["last"].any(axis=1).sum() > len(b) // 2  # episode ends sit inside windows
+
+
+def test_packed_window_keeps_its_first_episode_id_and_discard_starts_fresh():
+    w = SequenceWriter(FIELDS, seq_len=3, overlap=0, num_envs=1, pack=True)
+    w.add(_step(0, [True]))  # a 1-step episode, then a second one in the same window
+    w.add(_step(1, [False]))
+    w.add(_step(2, [False]))
+    w.add(_step(3, [False]))
+    w.discard([0])  # the unfinished window [3] is dropped
+    for t in (4, 5, 6):
+        w.add(_step(t, [False]))
+    b = w.pop()
+    assert b.data["obs"][..., 0].tolist() == [[0, 1, 2], [4, 5, 6]]
+    assert b.episode_id[0] != b.episode_id[1]
+
+
 def test_discard_drops_unfinished_window():
     w = SequenceWriter(FIELDS, seq_len=4, overlap=0, num_envs=2)
     for t in range(3):

@@ -52,7 +52,11 @@ PLANS = "plans"  # searches or plans at decision time (e.g. MCTS), not only a po
 # predicts embeddings, not observations (no decoder): `embedding_plot` (`wmdist dream` draws the planned
 # embedding trajectory against the real one instead of a video)
 PLOTS_EMBEDDINGS = "plots_embeddings"
-CAPABILITIES: frozenset[str] = frozenset({PREDICTS_OBSERVATIONS, TWO_PLAYER, REANALYZE, PLANS, PLOTS_EMBEDDINGS})
+# its learner restarts its state at `first` inside a sampled window, so one window may hold the end of
+# an episode and the start of the next (`replay.pack_episodes`)
+PACKED_WINDOWS = "packed_windows"
+CAPABILITIES: frozenset[str] = frozenset({PREDICTS_OBSERVATIONS, TWO_PLAYER, REANALYZE, PLANS, PLOTS_EMBEDDINGS,
+                                          PACKED_WINDOWS})
 
 
 @dataclass(frozen=True)

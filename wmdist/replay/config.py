@@ -20,6 +20,11 @@ class ReplayConfig:
     capacity_bytes: int = param(0, "optional cap on stored array bytes over all shards (0 = none)", ge=0)
     seq_len: int = param(64, "steps T of one stored sequence", ge=1)
     overlap: int = param(0, "steps shared by consecutive windows of one episode (0..T-1)", ge=0)
+    pack_episodes: bool = param(
+        False, "an episode's end does not close its window: the env's next episode fills the rest, so every "
+               "stored window holds seq_len real steps and samples_per_insert counts real steps (short "
+               "episodes otherwise insert mostly padding). Only for learners that restart at `first` inside a "
+               "window (Dreamer)")
     sampler: str = param("uniform", "how sequences are drawn", choices=("uniform", "prioritized"))
     priority_alpha: float = param(0.6, "priority exponent alpha: P(i) = p_i^alpha / sum p^alpha", ge=0)
     priority_beta: float = param(0.4, "importance-weight exponent beta: w_i = (N P(i))^-beta", ge=0, le=1)

@@ -6,6 +6,12 @@ holds T steps (the next window of the same episode then starts with the last `ov
 steps) or when the env's step has `last=True` (the window is zero-padded, `mask = 0`
 after the end). Only complete windows are returned by `pop()`: a sequence becomes
 visible to replay only when complete.
+
+With `pack=True` an episode's end does not close its window: the next episode of that env
+continues it (its first step has `first=True`), so every window holds T real steps. For
+learners that reset their state at `first` inside a window (Dreamer): short episodes then
+fill whole windows instead of padding, and the rate limiter's count of inserted sequences
+stays a count of real steps.
 """
 from __future__ import annotations
 
@@ -16,7 +22,8 @@ from wmdist.replay.batch import SequenceBatch, check_field
 
 
 class SequenceWriter:
-    def __init__(self, fields: dict[str, FieldSpec], seq_len: int, overlap: int, num_envs: int) -> None:
+    def __init__(self, fields: dict[str, FieldSpec], seq_len: int, overlap: int, num_envs: int,
+                 pack: bool = False) -> None:
         if seq_len < 1:
             raise ValueError(f"seq_len must be >= 1, got {seq_len}")
         if not 0 <= overlap < seq_len:
@@ -26,12 +33,13 @@ class SequenceWriter:
         if "last" in fields and fields["last"] != FieldSpec((), "bool"):
             raise ValueError("field 'last' must be declared as FieldSpec((), 'bool')")
         self.fields = dict(fields)
-        self.T, self.overlap, self.E = seq_len, overlap, num_envs
+        self.T, self.overlap, self.E, self.pack = seq_len, overlap, num_envs, pack
         E, T = num_envs, seq_len
         self._buf = {k: np.zeros((E, T, *s.shape), dtype=s.dtype) for k, s in self.fields.items()}  # [E, T, ...]
         self._ver = np.zeros((E, T), dtype=np.int64)  # [E, T] policy version per step
         self._pos = np.zeros(E, dtype=np.int64)  # [E] next free step in each env's window
         self._episode = np.arange(E, dtype=np.int64)  # [E] current episode id per env
+        self._window_episode = self._episode.copy()  # [E] episode id of each window's first step
         self._next_episode = E
         self._done: list[tuple[dict[str, np.ndarray], int, int, int]] = []  # (window, n_real, version, episode)
 
@@ -56,7 +64,11 @@ class SequenceWriter:
             buf[env, pos] = step[name]
         self._ver[env, pos] = int(version)
         self._pos[env] += 1
-        last = step["last"]
+        last = np.asarray(step["last"], bool)
+        if self.pack:  # an ended episode is continued by the env's next one in the same window
+            for j in np.flatnonzero(last):
+                self._new_episode(int(env[j]), window_too=False)
+            last = np.zeros_like(last)
         for j in np.flatnonzero(last | (self._pos[env] == self.T)):
             self._emit(int(env[j]), bool(last[j]))
 
@@ -67,11 +79,11 @@ class SequenceWriter:
             w = buf[i].copy()  # [T, ...]
             w[n:] = 0  # padding after the episode's end
             window[name] = w
-        self._done.append((window, n, int(self._ver[i, :n].min()), int(self._episode[i])))
+        self._done.append((window, n, int(self._ver[i, :n].min()), int(self._window_episode[i])))
+        self._window_episode[i] = self._episode[i]
         if last:
             self._pos[i] = 0
-            self._episode[i] = self._next_episode
-            self._next_episode += 1
+            self._new_episode(i)
         else:  # the next window of this episode starts with the last `overlap` steps
             k = self.overlap
             for buf in self._buf.values():
@@ -85,8 +97,13 @@ class SequenceWriter:
             if not 0 <= i < self.E:
                 raise ValueError(f"env id {i} out of range [0, {self.E})")
             self._pos[i] = 0
-            self._episode[i] = self._next_episode
-            self._next_episode += 1
+            self._new_episode(i)
+
+    def _new_episode(self, i: int, window_too: bool = True) -> None:
+        self._episode[i] = self._next_episode
+        self._next_episode += 1
+        if window_too:
+            self._window_episode[i] = self._episode[i]
 
     def pending(self) -> int:
         """Complete windows waiting for `pop()`."""

@@ -31,6 +31,7 @@ class Checked:
 
 
 def check_env_and_algo(cfg: RunConfig) -> tuple[EnvSpec, Any]:
+    from wmdist.algos.base import PACKED_WINDOWS
     from wmdist.runtime.roles.setup import build_algorithm
     from wmdist.runtime.train import env_spec_or_error
 
@@ -43,6 +44,10 @@ def check_env_and_algo(cfg: RunConfig) -> tuple[EnvSpec, Any]:
         algo.check_run(cfg)
     except (ValueError, TypeError) as err:
         raise ConfigError(first_line(err)) from None
+    if cfg.replay.pack_episodes and not algo.offers(PACKED_WINDOWS):
+        raise ConfigError(f"replay.pack_episodes: {cfg.algo_name}'s learner reads each window as one episode "
+                          f"(its targets would run across episodes); only learners that restart at `first` "
+                          f"inside a window can pack them (dreamer)")
     return spec, algo
 
 

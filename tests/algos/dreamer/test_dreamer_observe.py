@@ -58,3 +58,26 @@ def test_observe_matches_the_plain_loop_values_and_gradients(version):
     # the restart really restarts: row 0 at step 4 is the zero-state step, like every row at 0
     torch.testing.assert_close(deter[0, 4], deter[1, 0])
     assert not torch.allclose(deter[1, 4], deter[1, 0])
+
+
+@pytest.mark.parametrize("version", [1, 3])
+def test_a_packed_window_carries_nothing_across_an_episode_start(version):
+    """replay.pack_episodes puts the end of one episode and the start of the next in one
+    window: the second episode's states must not depend on the first one's observations or
+    actions (no gradient flows back across `first`), and its first state is the fresh start."""
+    spec = bench_spec(False)
+    learner = Dreamer(spec, tiny_config(version), seed=0).make_learner()
+    rssm = learner.wm.rssm
+    batch = random_batch(spec, 2, 9, seed=2)
+    batch["first"][:, 4] = True  # both rows: episode A at t=0..3, episode B from t=4
+    t = learner._tensors(batch)
+    embed = learner.wm.encode(t["obs"]).detach().requires_grad_(True)
+    action = action_to_model(t["action"], spec).detach().requires_grad_(True)
+    out = rssm.observe(embed, action, t["first"].bool(), torch.Generator().manual_seed(0))
+    (out.deter[:, 4:].sum() + out.post[:, 4:].sum()).backward()
+    assert embed.grad[:, :4].abs().max() == 0 and action.grad[:, :4].abs().max() == 0
+    assert embed.grad[:, 4:].abs().max() > 0  # the check could fail: B's own inputs do reach it
+    fresh = rssm.observe(embed[:, 4:].detach(), action[:, 4:].detach(), t["first"][:, 4:].bool(),
+                         torch.Generator().manual_seed(0))
+    torch.testing.assert_close(out.deter[:, 4], fresh.deter[:, 0])
+    torch.testing.assert_close(out.post[:, 4], fresh.post[:, 0])

@@ -33,7 +33,8 @@ class Collector:
         self.algo = build_algorithm(cfg, spec, seed)
         self.policy = self.algo.make_policy(device_for(cfg.actors.gpus))
         self.venv = make_vector_env(cfg.env, E, seed)
-        self.writer = SequenceWriter(self.algo.step_fields(), cfg.replay.seq_len, cfg.replay.overlap, E)
+        self.writer = SequenceWriter(self.algo.step_fields(), cfg.replay.seq_len, cfg.replay.overlap, E,
+                                     pack=cfg.replay.pack_episodes)
         self.rng = np.random.default_rng(seed)
         self.step = self.venv.reset(seed=seed)
         self.version = -1
