@@ -11,12 +11,15 @@ H = 15 from all 1024 posterior states. Two action kinds: discrete (REINFORCE, dy
 without autograd) and continuous (gradients through the dynamics). Each case also reports
 where the time goes (world model / imagination / actor / critic, from a wall-clock split
 of one update) and the top ops of a torch.profiler run. Further cases: the CartPole
-preset's model (units/GRU 128, batch 16 x 32), and the two-hot loss + mean as gathered
-bins against the dense reference, timed side by side.
+preset's model (units/GRU 128, batch 16 x 32), the two-hot loss + mean as gathered
+bins against the dense reference, timed side by side, and each time-bound preset's learner
+at 1 and 2 torch threads (what `learner.cpus: 2` buys where the other roles leave a core
+mostly idle).
 """
 from __future__ import annotations
 
 import time
+from pathlib import Path
 from typing import Iterator
 
 import numpy as np
@@ -25,6 +28,10 @@ import torch
 from wmdist.algos.dreamer import Dreamer, DreamerConfig
 from wmdist.envs.spec import EnvSpec
 from wmdist.runtime.malloc import tune_malloc
+
+CONFIGS = Path(__file__).parents[2] / "configs"
+# presets whose runs end at their time budget with the learner as the bottleneck
+THREAD_PRESETS = ("dreamerv1_dmc_cartpole_balance", "dreamerv3_dmc_cartpole_balance", "dreamerv3_minatar_breakout")
 
 
 def small_v3(bf16: bool, **over) -> DreamerConfig:
@@ -179,6 +186,36 @@ def _time_side_by_side(learners: dict[str, object], batch, updates: int) -> dict
     return {k: v / updates for k, v in times.items()}
 
 
+def _threads_case(preset: str, updates: int) -> dict:
+    """One preset's learner on its own model, batch and env shapes, timed at 1 and 2 torch
+    threads, updates interleaved so load changes hit both alike."""
+    from wmdist.config.loader import load_config
+    from wmdist.runtime.train import env_spec_or_error
+
+    cfg = load_config(CONFIGS / f"{preset}.yaml")
+    spec = env_spec_or_error(cfg)
+    learner = Dreamer(spec, cfg.algo, seed=0).make_learner()
+    batch = random_batch(spec, cfg.learner.batch_size, cfg.replay.seq_len)
+    before = torch.get_num_threads()
+    times = {1: 0.0, 2: 0.0}
+    try:
+        for n in times:  # warm-up in each
+            torch.set_num_threads(n)
+            learner.update(batch)
+        for _ in range(updates):
+            for n in times:
+                torch.set_num_threads(n)
+                t0 = time.perf_counter()
+                learner.update(batch)
+                times[n] += time.perf_counter() - t0
+    finally:
+        torch.set_num_threads(before)
+    return {"case": f"learner_threads_{preset}", "batch": f"{cfg.learner.batch_size}x{cfg.replay.seq_len}",
+            "imag_starts": cfg.algo.imag_starts, "seconds_per_update_1_thread": round(times[1] / updates, 3),
+            "seconds_per_update_2_threads": round(times[2] / updates, 3),
+            "speedup_2_threads": round(times[1] / times[2], 2)}
+
+
 def _loss_check(spec: EnvSpec, updates: int, b: int, t: int) -> dict:
     """Training losses in bf16 against fp32 beside the spread of fp32 itself.
 
@@ -272,6 +309,8 @@ def run(quick: bool = False) -> Iterator[dict]:
            "phase_seconds": {k: round(v, 3) for k, v in _split(learner, batch).items()}}
     yield _imag_starts_case(pb, pt, quick)
     yield _twohot_case(1024 if quick else 7680)
+    for preset in THREAD_PRESETS[:1] if quick else THREAD_PRESETS:
+        yield _threads_case(preset, 1 if quick else 5)
     yield {
         "case": "matmul_gflops", "shape": "1024x256 @ 256x768", "threads": threads, "native_bf16": native,
         "fp32": round(_matmul_gflops(torch.float32), 1),
