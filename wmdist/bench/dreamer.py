@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import time
 from pathlib import Path
-from typing import Iterator
+from typing import Callable, Iterator
 
 import numpy as np
 import torch
@@ -173,13 +173,20 @@ def _imag_starts_case(b: int, t: int, quick: bool) -> dict:
             "speedup": round(times["all"] / times["128"], 2)}
 
 
-def _time_side_by_side(learners: dict[str, object], batch, updates: int) -> dict[str, float]:
-    """Seconds per update of each learner, updates interleaved so load changes hit all alike."""
-    for learner in learners.values():
+def _time_side_by_side(learners: dict, batch, updates: int,
+                       before: Callable[[object], None] | None = None) -> dict:
+    """Seconds per update of each learner, updates interleaved so load changes hit all alike.
+    `before(key)`, if given, runs ahead of each of that key's updates, untimed (e.g. to set
+    the thread count one key stands for)."""
+    for k, learner in learners.items():
+        if before:
+            before(k)
         learner.update(batch)  # warm-up
     times = {k: 0.0 for k in learners}
     for _ in range(updates):
         for k, learner in learners.items():
+            if before:
+                before(k)
             t0 = time.perf_counter()
             learner.update(batch)
             times[k] += time.perf_counter() - t0
@@ -196,23 +203,14 @@ def _threads_case(preset: str, updates: int) -> dict:
     spec = env_spec_or_error(cfg)
     learner = Dreamer(spec, cfg.algo, seed=0).make_learner()
     batch = random_batch(spec, cfg.learner.batch_size, cfg.replay.seq_len)
-    before = torch.get_num_threads()
-    times = {1: 0.0, 2: 0.0}
-    try:
-        for n in times:  # warm-up in each
-            torch.set_num_threads(n)
-            learner.update(batch)
-        for _ in range(updates):
-            for n in times:
-                torch.set_num_threads(n)
-                t0 = time.perf_counter()
-                learner.update(batch)
-                times[n] += time.perf_counter() - t0
+    threads = torch.get_num_threads()
+    try:  # one learner under two keys: the key is its thread count
+        times = _time_side_by_side({1: learner, 2: learner}, batch, updates, before=torch.set_num_threads)
     finally:
-        torch.set_num_threads(before)
+        torch.set_num_threads(threads)
     return {"case": f"learner_threads_{preset}", "batch": f"{cfg.learner.batch_size}x{cfg.replay.seq_len}",
-            "imag_starts": cfg.algo.imag_starts, "seconds_per_update_1_thread": round(times[1] / updates, 3),
-            "seconds_per_update_2_threads": round(times[2] / updates, 3),
+            "imag_starts": cfg.algo.imag_starts, "seconds_per_update_1_thread": round(times[1], 3),
+            "seconds_per_update_2_threads": round(times[2], 3),
             "speedup_2_threads": round(times[1] / times[2], 2)}
 
 

@@ -67,7 +67,7 @@ class SequenceWriter:
         last = np.asarray(step["last"], bool)
         if self.pack:  # an ended episode is continued by the env's next one in the same window
             for j in np.flatnonzero(last):
-                self._new_episode(int(env[j]), window_too=False)
+                self._new_episode(int(env[j]))
             last = np.zeros_like(last)
         for j in np.flatnonzero(last | (self._pos[env] == self.T)):
             self._emit(int(env[j]), bool(last[j]))
@@ -80,7 +80,6 @@ class SequenceWriter:
             w[n:] = 0  # padding after the episode's end
             window[name] = w
         self._done.append((window, n, int(self._ver[i, :n].min()), int(self._window_episode[i])))
-        self._window_episode[i] = self._episode[i]
         if last:
             self._pos[i] = 0
             self._new_episode(i)
@@ -90,6 +89,7 @@ class SequenceWriter:
                 buf[i, :k] = buf[i, self.T - k:]
             self._ver[i, :k] = self._ver[i, self.T - k:]
             self._pos[i] = k
+        self._window_episode[i] = self._episode[i]
 
     def discard(self, env_ids) -> None:
         """Drop the unfinished windows of these envs (their episode is abandoned)."""
@@ -98,12 +98,11 @@ class SequenceWriter:
                 raise ValueError(f"env id {i} out of range [0, {self.E})")
             self._pos[i] = 0
             self._new_episode(i)
+            self._window_episode[i] = self._episode[i]
 
-    def _new_episode(self, i: int, window_too: bool = True) -> None:
+    def _new_episode(self, i: int) -> None:
         self._episode[i] = self._next_episode
         self._next_episode += 1
-        if window_too:
-            self._window_episode[i] = self._episode[i]
 
     def pending(self) -> int:
         """Complete windows waiting for `pop()`."""
