@@ -179,3 +179,27 @@ def test_actor_lambda_changes_the_actors_returns_only(monkeypatch):
     assert lams == [0.95, 0.0] and td_critic == base_critic and td_actor != base_actor
     lam, r, c, v = calls[1]
     assert torch.allclose(real(r, c, v, 0.0), r + c * v[1:])  # lambda 0: the one-step TD target
+
+
+def test_actor_lr_decay_reaches_its_factor_and_survives_a_checkpoint():
+    spec = bench_spec(True)
+    cfg = tiny_config(3, actor_lr=1e-3, critic_lr=2e-3, actor_lr_decay_updates=4, actor_lr_decay_to=0.25)
+    learner = Dreamer(spec, cfg).make_learner()
+    batch = random_batch(spec, 3, 6)
+    seen = [learner.update(batch).metrics["actor_lr"] for _ in range(3)]
+    # linear from 1e-3 to 2.5e-4 over 4 updates: 1e-3, 8.125e-4, 6.25e-4, 4.375e-4, then 2.5e-4 on
+    np.testing.assert_allclose(seen, [1e-3, 8.125e-4, 6.25e-4], rtol=1e-9)
+    resumed = Dreamer(spec, cfg).make_learner()
+    resumed.load_state_dict(learner.state_dict())
+    later = [resumed.update(batch).metrics["actor_lr"] for _ in range(3)]
+    np.testing.assert_allclose(later, [4.375e-4, 2.5e-4, 2.5e-4], rtol=1e-9)
+    assert resumed.actor_opt.optimizer.param_groups[0]["lr"] == pytest.approx(2.5e-4)
+    assert resumed.critic_opt.optimizer.param_groups[0]["lr"] == pytest.approx(2e-3)  # the critic keeps its rate
+    assert resumed.wm_opt.optimizer.param_groups[0]["lr"] == pytest.approx(cfg.resolved().model_lr)
+
+
+def test_without_decay_the_actor_keeps_its_rate():
+    spec = bench_spec(True)
+    learner = Dreamer(spec, tiny_config(3, actor_lr=1e-3)).make_learner()
+    batch = random_batch(spec, 3, 6)
+    assert [learner.update(batch).metrics["actor_lr"] for _ in range(3)] == [1e-3] * 3

@@ -116,6 +116,12 @@ class DreamerConfig:
     model_lr: float | None = param(None, "world-model Adam learning rate", gt=0)
     actor_lr: float | None = param(None, "actor Adam learning rate", gt=0)
     critic_lr: float | None = param(None, "critic Adam learning rate", gt=0)
+    # not in the papers: lets late policy versions change less, where evaluations swing between
+    # neighbouring versions (issue 24, BENCHMARKS); off by default
+    actor_lr_decay_updates: int = param(0, "updates over which the actor's learning rate falls linearly to "
+                                        "actor_lr x actor_lr_decay_to, then stays (0 = constant, as the papers)", ge=0)
+    actor_lr_decay_to: float = param(1.0, "the factor the actor's learning rate reaches after actor_lr_decay_updates",
+                                     gt=0, le=1)
     model_clip: float | None = param(None, "world-model gradient norm clip", ge=0)
     ac_clip: float | None = param(None, "actor and critic gradient norm clip", ge=0)
     adam_eps: float | None = param(None, "Adam epsilon", gt=0)

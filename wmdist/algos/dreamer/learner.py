@@ -18,7 +18,7 @@ from wmdist.nets.latent_layers import Latent
 from wmdist.algos.dreamer.nets import ActorCritic, WorldModel, action_to_model
 from wmdist.envs.spec import EnvSpec
 from wmdist.nets.dists import bernoulli_nll, twohot_bins, twohot_loss
-from wmdist.nets.optim import GuardedStep, OptimConfig
+from wmdist.nets.optim import GuardedStep, OptimConfig, lr_at
 from wmdist.nets.world_model import load_world_model, world_model_weights
 
 
@@ -46,11 +46,13 @@ class DreamerLearner(Learner):
         self.bins = twohot_bins(cfg.bins, cfg.bin_low, cfg.bin_high).to(self.device)
         self.ac_loss = ActorCriticLoss(cfg, self.wm, self.ac, self.bins)
 
-        def opt(lr: float, clip: float) -> OptimConfig:
-            return OptimConfig(kind="adam", lr=lr, eps=cfg.adam_eps, clip_norm=clip)
+        def opt(lr: float, clip: float, **schedule: Any) -> OptimConfig:
+            return OptimConfig(kind="adam", lr=lr, eps=cfg.adam_eps, clip_norm=clip, **schedule)
 
+        actor_schedule = ({"schedule": "linear", "decay_steps": cfg.actor_lr_decay_updates,
+                           "decay_rate": cfg.actor_lr_decay_to} if cfg.actor_lr_decay_updates else {})
         self.wm_opt = GuardedStep(self.wm.parameters(), opt(cfg.model_lr, cfg.model_clip))
-        self.actor_opt = GuardedStep(self.ac.actor.parameters(), opt(cfg.actor_lr, cfg.ac_clip))
+        self.actor_opt = GuardedStep(self.ac.actor.parameters(), opt(cfg.actor_lr, cfg.ac_clip, **actor_schedule))
         self.critic_opt = GuardedStep(self.ac.critic.parameters(), opt(cfg.critic_lr, cfg.ac_clip))
         self.generator = torch.Generator(self.device).manual_seed(seed)
         self.updates = 0
@@ -134,6 +136,7 @@ class DreamerLearner(Learner):
                 raise NonFiniteLoss(f"dreamer {name} loss is {float(loss.detach())}")
         # actor first: its graph reads the critic's and world model's current weights
         with prec.timed("actor_critic", spent):
+            metrics["actor_lr"] = lr_at(self.actor_opt.cfg, self.actor_opt.steps)  # the rate this step applies
             metrics["actor_grad_norm"] = self.actor_opt(actor_loss)
             metrics["critic_grad_norm"] = self.critic_opt(critic_loss)
         with prec.timed("world_model", spent):
