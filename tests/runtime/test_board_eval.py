@@ -127,6 +127,8 @@ def test_the_evaluator_role_and_wmdist_eval_report_lines_lost(tmp_path):
     broker.publish(version, [Ready(weights)])  # as the local runner publishes
     res = EvaluatorRole(cfg, spec, LocalHandle(broker)).evaluate()
     assert len(res["returns"]) == 2
+    outcomes = np.asarray(res["returns"])
+    assert res["eval_won"] == np.mean(outcomes > 0) and res["eval_lost"] == np.mean(outcomes < 0)
     assert res["eval_lines"] > 0 and 0 <= res["eval_lost_lines"] <= res["eval_lines"]
     out = io.StringIO()
     assert evaluate_run(str(run), episodes=2, out=out) == 0

@@ -101,3 +101,30 @@ def test_board_bench_plays_the_solver_and_plots_losses(tmp_path, capsys):
     # every line judged too: an untrained net loses some, and the per-side counts add up
     assert res["lost_lines"] == res["lost_lines_p0"] + res["lost_lines_p1"] > 0
     assert png.stat().st_size > 1000 and lines_png.stat().st_size > 1000
+
+
+def test_board_bench_on_connect4_plays_the_runs_uct_opponent_and_plots_games_won(tmp_path, capsys):
+    import json
+
+    from wmdist.bench.board import main as board_main
+    from wmdist.envs.factory import env_spec
+    from wmdist.runtime.roles.setup import build_algorithm
+
+    preset = Path(__file__).parents[2] / "configs" / "muzero_connect4.yaml"
+    cfg = load_config(str(preset), [f"run.dir={tmp_path}", "algo.search.num_simulations=2", "algo.hidden=[8]",
+                                    "algo.latent_dim=8", "eval.opponent_rollouts=7"])
+    run_dir = tmp_path / "c4"
+    run_dir.mkdir()
+    (run_dir / "config.yaml").write_text(dump_yaml(cfg))
+    weights = build_algorithm(cfg, env_spec(cfg.env), 0).make_learner().get_weights()
+    save_checkpoint(run_dir, {}, weights, 3, {"updates": 3, "env_steps": 90}, None, keep=2)
+    (run_dir / "metrics.jsonl").write_text(
+        '{"kind": "eval", "env_steps": 40, "eval_return": -0.8, "eval_min": -1, "eval_won": 0.1, "time": 60}\n'
+        '{"kind": "eval", "env_steps": 90, "eval_return": 0.2, "eval_min": -1, "eval_won": 0.6, "time": 120}\n')
+    png = tmp_path / "won.png"
+    assert board_main([str(run_dir), "--games", "4", "--png", str(png)]) == 0
+    res = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert res["opponent"] == "UCT (7 rollouts per move)"  # the run's own eval.opponent_rollouts, not the default
+    assert res["games"] == 4 and res["won_fraction"] == res["won"] / 4
+    assert "lost_lines" not in res  # the whole-tree judge is for tic-tac-toe only
+    assert png.stat().st_size > 1000

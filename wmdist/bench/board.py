@@ -1,12 +1,15 @@
-"""Board-game benchmark: a trained run's agent against the exact solver.
+"""Board-game benchmark: a trained run's agent against the run's evaluation opponent.
 
     python -m wmdist.bench.board RUN_DIR --games 200 --png docs/bench/muzero_tictactoe.png \
         --lines-png docs/bench/muzero_tictactoe_lines.png
 
 Plays `games` games with the run's latest checkpoint (half as first player, half as
-second; the solver picks a random optimal move, so games differ), judges the checkpoint over
-every opponent line (tic-tac-toe), prints one JSON line with the counts, and plots the games
-lost per in-training evaluation against env steps and the lines lost per evaluation
+second) against the opponent the run evaluated with: tic-tac-toe's exact solver (a random
+optimal move, so games differ) or connect four's UCT search (`eval.opponent_rollouts` random
+rollouts per move). Prints one JSON line with the counts (and `won_fraction`); for
+tic-tac-toe it also judges the checkpoint over every opponent line. `--png` plots the
+in-training evaluations against env steps: games lost to the solver (tic-tac-toe) or the
+share of games won (connect four); `--lines-png` the lines lost per evaluation
 (`eval_lost_lines`) against wall-clock minutes.
 """
 from __future__ import annotations
@@ -46,6 +49,21 @@ def plot_losses(metrics: Path, games_per_eval: int, png: Path, title: str) -> No
           "env steps", f"games lost of {games_per_eval}", title, png)
 
 
+def plot_won(metrics: Path, png: Path, title: str) -> None:
+    """Share of games won per evaluation (`eval_won`; runs from before it was logged: the
+    mean outcome, which equals 2 x won - 1 when no game is drawn)."""
+    ev = [r for r in read_jsonl(metrics) if r.get("kind") == "eval" and r.get("eval_min") is not None]
+    if ev and all(r.get("eval_won") is not None for r in ev):
+        _plot([r["env_steps"] for r in ev], [r["eval_won"] for r in ev], "env steps", "share of games won", title, png)
+    else:
+        _plot([r["env_steps"] for r in ev], [r["eval_return"] for r in ev], "env steps",
+              "mean outcome (+1 won, 0 drawn, -1 lost)", title, png)
+
+
+def opponent_name(game: str, rollouts: int) -> str:
+    return "the exact solver" if game == "tictactoe" else f"UCT ({rollouts} rollouts per move)"
+
+
 def plot_lost_lines(metrics: Path, png: Path, title: str) -> None:
     """Opponent lines lost per in-training evaluation (the whole-tree judge) against minutes."""
     ev = [r for r in read_jsonl(metrics) if r.get("kind") == "eval" and r.get("eval_lost_lines") is not None]
@@ -71,14 +89,20 @@ def main(argv: list[str] | None = None) -> int:
     policy = algo.make_policy("cpu")
     policy.set_weights(weights, version)
     env = make_env(cfg.env, cfg.run.seed)
-    counts = summary(play_games(policy, env, a.games, default_opponent(env, cfg.run.seed + 1)))
+    game, rollouts = env.game.name, cfg.eval.opponent_rollouts
+    counts = summary(play_games(policy, env, a.games, default_opponent(env, cfg.run.seed + 1, rollouts)))
     lost = counts["lost_p0"] + counts["lost_p1"]
-    lines = judge_lines(policy, env) if env.game.name == "tictactoe" else {}
-    print(json.dumps({"env": cfg.env.id, "checkpoint": ckpt.name, "weights_version": version, "games": a.games,
-                      **counts, "lost": lost, "never_loses": lost == 0, **lines}), flush=True)
-    if a.png:
+    won = counts["won_p0"] + counts["won_p1"]
+    lines = judge_lines(policy, env) if game == "tictactoe" else {}
+    print(json.dumps({"env": cfg.env.id, "checkpoint": ckpt.name, "weights_version": version,
+                      "opponent": opponent_name(game, rollouts), "games": a.games, **counts, "won": won,
+                      "won_fraction": won / a.games, "lost": lost, "never_loses": lost == 0, **lines}), flush=True)
+    if a.png and game == "tictactoe":
         plot_losses(Path(a.run_dir) / "metrics.jsonl", cfg.eval.episodes, Path(a.png),
                     f"{cfg.env.id}: games lost to the exact solver per evaluation")
+    elif a.png:
+        plot_won(Path(a.run_dir) / "metrics.jsonl", Path(a.png),
+                 f"{cfg.env.id}: games won against {opponent_name(game, rollouts)} per evaluation")
     if a.lines_png:
         plot_lost_lines(Path(a.run_dir) / "metrics.jsonl", Path(a.lines_png),
                         f"{cfg.env.id}: opponent lines lost per evaluation (every line judged)")

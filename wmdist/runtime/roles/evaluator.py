@@ -85,7 +85,9 @@ class EvaluatorRole:
             outcomes = play_games(self.policy, self.board, self.cfg.eval.episodes, self.opponent)
             returns = outcomes[0] + outcomes[1]
             lengths = [0] * len(returns)
-            extra = self._judge()
+            # Fractions of games won and lost: the mean outcome alone hides draws (connect four's target is games won)
+            extra = {"eval_won": float(np.mean(np.asarray(returns) > 0)),
+                     "eval_lost": float(np.mean(np.asarray(returns) < 0)), **self._judge()}
         else:
             returns, lengths = play_episodes(self.policy, self.venv, self.cfg.eval.episodes)
         return {"version": self.version, "returns": returns, "lengths": lengths,
