@@ -35,6 +35,9 @@ class EnvConfig:
     minatar_ramping: bool = param(True, "minatar: difficulty ramping as the game goes on (MinAtar paper default)")
     minatar_obs: str = param("image", "minatar: image = uint8 (10, 10, C) of 0/255 (conv nets); "
                                       "vector = float32 (100*C,) of 0/1 (MLP encoders)", choices=("image", "vector"))
+    board_obs: str = param("vector", "board: vector = float32 (3*cells,) of 0/1 (MLP nets); planes = uint8 "
+                                     "(rows, cols, 3) of 0/255 (conv nets, e.g. algo.conv_stem: grid)",
+                           choices=("vector", "planes"))
 
     def validate(self) -> "EnvConfig":
         """Raise ValueError (one line naming the field) on a wrong type or out-of-range value."""

@@ -156,7 +156,7 @@ def make_env(cfg: EnvConfig, seed: int) -> Env:
         raise ValueError(f"env.action_repeat must be 1 for board games, got {cfg.action_repeat}")
     from wmdist.envs.boardgames.env import BoardEnv
 
-    return BoardEnv(name, seed)
+    return BoardEnv(name, seed, obs=cfg.board_obs)
 
 
 def env_spec(cfg: EnvConfig) -> EnvSpec:

@@ -38,7 +38,7 @@ def play_board(policy: Policy, env: BoardEnv, agent_player: int, opponent: Oppon
     while True:
         mover = env.to_play()
         if mover == agent_player:
-            action = int(greedy_action(policy, env.game.observe(env.state), env.legal_actions(), mover, first))
+            action = int(greedy_action(policy, env.observe(env.state), env.legal_actions(), mover, first))
             first = False
         else:
             action = opponent(env.state)
@@ -97,7 +97,7 @@ def judge_lines(policy: Policy, env: BoardEnv, max_examples: int = 3) -> dict:
         raise ValueError(f"judge_lines enumerates the whole game tree: tic-tac-toe only, not {game.name}")
 
     def strategy(states: list) -> np.ndarray:  # positions (agent to move) -> [N] actions
-        obs = np.stack([game.observe(s) for s in states])  # [N, obs_dim]
+        obs = np.stack([env.observe(s) for s in states])  # [N, *obs_shape]
         legal = np.stack([game.legal(s) for s in states])  # [N, A]
         to_play = np.array([s.to_play for s in states])  # [N]
         actions, _ = policy.act(obs, np.ones(len(states), bool), legal, to_play, False)

@@ -30,11 +30,12 @@ class Symmetries:
               policy: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Transform row b by symmetry g[b].
 
-        g [B] int, obs [B, D], actions [B, K] int, policy [B, K+1, A]
+        g [B] int, obs [B, D] or [B, H, W, C] (permuted flattened), actions [B, K] int, policy [B, K+1, A]
         -> the transformed (obs, actions, policy), new arrays of the same shapes.
         """
         rows = np.arange(len(g))[:, None]
-        obs_t = obs[rows, self.obs_inv[g]]  # [B, D]
+        flat = obs.reshape(len(g), -1)  # [B, D]
+        obs_t = flat[rows, self.obs_inv[g]].reshape(obs.shape)
         actions_t = self.act_perm[g][rows, actions]  # [B, K]
         policy_t = np.take_along_axis(policy, self.act_inv[g][:, None, :], axis=2)  # [B, K+1, A]
         return obs_t, actions_t, policy_t
