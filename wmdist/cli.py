@@ -71,9 +71,13 @@ def _parser() -> argparse.ArgumentParser:
 
     v = sub.add_parser("eval", help="play greedy episodes with a run's latest checkpoint",
                        description="Greedy episodes with the latest checkpoint of RUN_DIR; prints the returns. "
-                       "Board games play the exact solver (or you, with --human).")
+                       "Board games play the run's opponent: tic-tac-toe's exact solver, connect four's UCT "
+                       "search (or you, with --human).")
     v.add_argument("run_dir")
     v.add_argument("--episodes", type=_positive_int, default=10)
+    v.add_argument("--simulations", type=_positive_int, default=None,
+                   help="MuZero family: search simulations per move (default: the run's eval.num_simulations, "
+                        "else its algo.search.num_simulations)")
     v.add_argument("--video", default=None, metavar="PATH.gif", help="record the first episode")
     v.add_argument("--human", action="store_true", help="board games: play against the agent at the terminal")
 
@@ -158,7 +162,7 @@ def cmd_envs(a: argparse.Namespace) -> int:
 def cmd_eval(a: argparse.Namespace) -> int:
     from wmdist.runtime.evaluate import evaluate_run
 
-    return evaluate_run(a.run_dir, episodes=a.episodes, video=a.video, human=a.human)
+    return evaluate_run(a.run_dir, episodes=a.episodes, video=a.video, human=a.human, simulations=a.simulations or 0)
 
 
 def cmd_dream(a: argparse.Namespace) -> int:

@@ -5,6 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from wmdist.algos.base import Policy
 from wmdist.envs.boardgames.env import BoardEnv
@@ -166,3 +167,33 @@ def test_a_run_stops_when_the_judge_finds_no_more_lost_lines_and_keeps_the_judge
     assert evals and evals[0]["eval_lost_lines"] <= 1000
     version, _ = ck.load_weights(ck.latest_checkpoint(run_dir))
     assert version == evals[0]["eval_version"]
+
+
+def test_eval_num_simulations_sets_the_evaluators_search_only(tmp_path, capsys):
+    """`eval.num_simulations` gives the evaluator (and `wmdist eval --simulations`) its own search count;
+    the run's config, which the collectors and learner use, keeps its own. Bad values are one line."""
+    from tests.runtime.run_dirs import run_dir_with_checkpoint
+    from wmdist.cli import main
+    from wmdist.config.errors import ConfigError
+    from wmdist.config.loader import load_config
+    from wmdist.runtime.calls import LocalHandle
+    from wmdist.runtime.evaluate import load_run
+    from wmdist.runtime.roles.evaluator import EvaluatorRole
+    from wmdist.runtime.roles.setup import evaluation_config
+    from wmdist.runtime.roles.weights import WeightBroker
+
+    run = run_dir_with_checkpoint(tmp_path, "muzero_tictactoe", ["eval.episodes=2", "algo.search.num_simulations=4",
+                                                                 "eval.num_simulations=9"])
+    cfg, spec, *_ = load_run(str(run))
+    assert evaluation_config(cfg).algo.search.num_simulations == 9
+    assert cfg.algo.search.num_simulations == 4  # a copy: self-play keeps its count
+    role = EvaluatorRole(cfg, spec, LocalHandle(WeightBroker()))
+    assert role.policy.searcher.cfg.num_simulations == 9
+    assert main(["eval", str(run), "--episodes", "2", "--simulations", "6"]) == 0
+    assert "6 simulations per move" in capsys.readouterr().out
+    with pytest.raises(SystemExit) as bad:  # not a positive int: argparse's one line, exit 2
+        main(["eval", str(run), "--episodes", "2", "--simulations", "0"])
+    assert bad.value.code == 2
+    dreamer = Path(__file__).parents[2] / "configs" / "dreamerv3_cartpole.yaml"
+    with pytest.raises(ConfigError, match="eval.num_simulations: algorithm 'dreamer' has no tree search"):
+        load_config(str(dreamer), ["eval.num_simulations=8"])

@@ -72,17 +72,33 @@ def plot_lost_lines(metrics: Path, png: Path, title: str) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
+    from wmdist.config.errors import ConfigError
+
+    try:
+        return _main(argv)
+    except ConfigError as err:  # a bad run directory or --simulations: one line, as `wmdist eval`
+        print(f"wmdist: error: {err}", file=sys.stderr)
+        return 2
+
+
+def _main(argv: list[str] | None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("run_dir")
     p.add_argument("--games", type=int, default=200)
     p.add_argument("--png", default=None)
     p.add_argument("--lines-png", default=None, help="plot the in-training judge's lost lines per evaluation")
+    p.add_argument("--simulations", type=int, default=0,
+                   help="search simulations per move (default: the run's eval.num_simulations, else its search's)")
     a = p.parse_args(argv)
     from wmdist.envs.factory import make_env
     from wmdist.runtime.board_eval import default_opponent, judge_lines, play_games, summary
     from wmdist.runtime.evaluate import load_run
+    from wmdist.runtime.roles.setup import build_algorithm, evaluation_config
 
-    cfg, spec, algo, version, weights, ckpt = load_run(a.run_dir)
+    cfg, spec, algo, version, weights, ckpt = load_run(a.run_dir, [f"eval.num_simulations={a.simulations}"]
+                                                       if a.simulations else None)
+    if cfg.eval.num_simulations:
+        algo = build_algorithm(evaluation_config(cfg), spec, cfg.run.seed + 31_337)
     if spec.players != 2:
         print(f"wmdist: {a.run_dir} is not a board-game run", file=sys.stderr)
         return 2
@@ -94,7 +110,8 @@ def main(argv: list[str] | None = None) -> int:
     lost = counts["lost_p0"] + counts["lost_p1"]
     won = counts["won_p0"] + counts["won_p1"]
     lines = judge_lines(policy, env) if game == "tictactoe" else {}
-    print(json.dumps({"env": cfg.env.id, "checkpoint": ckpt.name, "weights_version": version,
+    sims = cfg.eval.num_simulations or getattr(getattr(cfg.algo, "search", None), "num_simulations", None)
+    print(json.dumps({"env": cfg.env.id, "checkpoint": ckpt.name, "weights_version": version, "simulations": sims,
                       "opponent": opponent_name(game, rollouts), "games": a.games, **counts, "won": won,
                       "won_fraction": won / a.games, "lost": lost, "never_loses": lost == 0, **lines}), flush=True)
     if a.png and game == "tictactoe":

@@ -255,6 +255,8 @@ def check_consistency(cfg: RunConfig) -> None:
             validate()
         except ValueError as err:
             raise ConfigError(str(err).strip().splitlines()[0]) from None
+    if cfg.eval.num_simulations and not hasattr(getattr(cfg.algo, "search", None), "num_simulations"):
+        raise ConfigError(f"eval.num_simulations: algorithm '{cfg.algo_name}' has no tree search (leave it 0)")
 
 
 def to_dict(cfg: Any) -> Any:

@@ -75,6 +75,8 @@ class EvalConfig:
     envs: int = param(5, "envs the evaluator steps together", ge=1)
     cpus: float = param(0.25, "Ray CPUs for the evaluator", gt=0)
     opponent_rollouts: int = param(200, "board:connect4: random rollouts per move of the MCTS (UCT) opponent", ge=1)
+    num_simulations: int = param(0, "MuZero family: search simulations per evaluation move (0 = algo.search's own); "
+                                    "more search at test time than in self-play", ge=0)
     judge_lines: bool = param(True, "board:tictactoe: also play the greedy agent against every opponent line and "
                                     "log the lines it loses (eval_lost_lines)")
     gpus: float = param(0.0, "Ray GPUs for the evaluator", ge=0)

@@ -14,12 +14,12 @@ from wmdist.algos.base import PLOTS_EMBEDDINGS, PREDICTS_OBSERVATIONS
 from wmdist.config.errors import ConfigError
 from wmdist.runtime import checkpoint as ck
 from wmdist.runtime.board_eval import default_opponent, greedy_action, judge_lines, play_games
-from wmdist.runtime.roles.setup import build_algorithm
+from wmdist.runtime.roles.setup import build_algorithm, evaluation_config
 from wmdist.runtime.train import env_spec_or_error, load_run_config
 
 
-def load_run(run_dir: str):
-    cfg = load_run_config(run_dir)
+def load_run(run_dir: str, overrides: list[str] | None = None):
+    cfg = load_run_config(run_dir, overrides)
     ckpt = ck.latest_checkpoint(run_dir)
     if ckpt is None:
         raise ConfigError(f"{run_dir} has no checkpoint yet")
@@ -61,12 +61,16 @@ def episode_progress(episodes: int, every_seconds: float, err: IO[str]) -> Calla
 
 
 def evaluate_run(run_dir: str, episodes: int = 10, video: str | None = None, human: bool = False,
-                 out: IO[str] | None = None, progress_seconds: float = 10.0) -> int:
+                 out: IO[str] | None = None, progress_seconds: float = 10.0, simulations: int = 0) -> int:
+    """`simulations` > 0: search this many simulations per move (as `eval.num_simulations`)."""
     out = out or sys.stdout  # looked up per call: a default bound at import outlives a redirected stdout
-    cfg, spec, algo, version, weights, ckpt = load_run(run_dir)
+    cfg, spec, algo, version, weights, ckpt = load_run(run_dir, [f"eval.num_simulations={simulations}"] if simulations else None)
+    if cfg.eval.num_simulations:  # the in-training evaluator's search count, not self-play's
+        algo = build_algorithm(evaluation_config(cfg), spec, cfg.run.seed + 31_337)
     policy = algo.make_policy("cpu")
     policy.set_weights(weights, version)
-    print(f"wmdist: {ckpt.name} (weights v{version}) on {cfg.env.id}", file=out)
+    sims = f", {cfg.eval.num_simulations} simulations per move" if cfg.eval.num_simulations else ""
+    print(f"wmdist: {ckpt.name} (weights v{version}) on {cfg.env.id}{sims}", file=out)
     if spec.players == 2:
         from wmdist.envs.factory import make_env
 

@@ -1,6 +1,7 @@
 """Small helpers every role's process uses to set itself up."""
 from __future__ import annotations
 
+import copy
 import os
 
 from wmdist.algos.base import Algorithm
@@ -32,6 +33,17 @@ def build_algorithm(cfg: RunConfig, spec: EnvSpec, seed: int) -> Algorithm:
     algo = resolve(cfg.algo_name)(spec, cfg.algo, seed=seed)
     algo.validate()
     return algo
+
+
+def evaluation_config(cfg: RunConfig) -> RunConfig:
+    """`cfg` as the evaluator plays: `eval.num_simulations`, when set, replaces the search's own
+    count (a copy; the collectors' and learner's config is untouched)."""
+    n = cfg.eval.num_simulations
+    if not n:
+        return cfg
+    out = copy.deepcopy(cfg)
+    out.algo.search.num_simulations = n
+    return out
 
 
 def device_for(gpus: float) -> str:
