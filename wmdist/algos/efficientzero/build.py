@@ -7,19 +7,9 @@ from torch import nn
 
 from wmdist.algos.efficientzero.config import EfficientZeroConfig
 from wmdist.algos.efficientzero.networks import ConsistencyHeads, EfficientZeroNet, PrefixHead, conv_reduce
-from wmdist.algos.muzero.build import check_spec, network_kind
-from wmdist.algos.muzero.networks import MLPNet, MuZeroNet
-from wmdist.algos.muzero.networks_conv import ConvNet
+from wmdist.algos.muzero.build import build_net as build_base
+from wmdist.algos.muzero.networks import MuZeroNet
 from wmdist.envs.spec import EnvSpec
-
-
-def _base(spec: EnvSpec, cfg: EfficientZeroConfig) -> MuZeroNet:
-    hidden = [int(w) for w in cfg.hidden]
-    va, ra = 2 * cfg.value_support + 1, 2 * cfg.reward_support + 1
-    if network_kind(spec, cfg) == "conv":
-        return ConvNet(tuple(spec.obs_shape), spec.num_actions, cfg.conv_channels, cfg.conv_blocks,
-                       cfg.conv_head_channels, hidden, va, ra, tuple(int(b) for b in cfg.conv_downsample_blocks))
-    return MLPNet(int(np.prod(spec.obs_shape)), spec.num_actions, cfg.latent_dim, hidden, va, ra)
 
 
 @torch.no_grad()
@@ -35,8 +25,7 @@ def _shapes(base: MuZeroNet, spec: EnvSpec) -> tuple[tuple[int, ...], tuple[int,
 
 
 def build_net(spec: EnvSpec, cfg: EfficientZeroConfig) -> EfficientZeroNet:
-    check_spec(spec, cfg)
-    base = _base(spec, cfg)
+    base = build_base(spec, cfg)  # MuZero's own builder: every network option means the same here
     latent_shape, feature_shape = _shapes(base, spec)
     prefix = None
     if cfg.value_prefix:

@@ -22,8 +22,8 @@ class EfficientZeroConfig(MuZeroConfig):
     conv_blocks: int = param(1, "conv: residual blocks in each of h, g, f (authors: 1)", ge=0)
     conv_head_channels: int = param(16, "conv: channels of the 1x1 conv before each head (authors: 16)", ge=1)
     conv_downsample_blocks: list[int] = param(
-        [1, 1, 1], "conv: residual blocks in the three stages of the 96->6 downsampling (authors: 1, 1, 1; "
-                   "MuZero: 2, 3, 3)", ge=0)
+        [1, 1, 1], "conv, atari stem: residual blocks in the three stages of the 96 -> 6 downsampling "
+                   "(authors: 1, 1, 1; MuZero: 2, 3, 3)", ge=0)
 
     # value prefix (the search's lstm_horizon is the reset period in training too)
     value_prefix: bool = param(True, "predict the value prefix (reward sum since the last LSTM reset) with an LSTM "
@@ -62,8 +62,6 @@ class EfficientZeroConfig(MuZeroConfig):
         if self.value_prefix:
             self.search.value_prefix = True  # the search reads the same head
         super().validate()
-        if len(self.conv_downsample_blocks) != 3:
-            raise ValueError(f"algo.conv_downsample_blocks needs 3 entries, got {self.conv_downsample_blocks}")
         if self.consistency_weight > 0 and self.augment_symmetries:
             raise ValueError("algo.consistency_weight > 0 cannot be combined with algo.augment_symmetries "
                              "(the consistency target would need the same symmetry)")

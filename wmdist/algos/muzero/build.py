@@ -37,7 +37,8 @@ def build_net(spec: EnvSpec, cfg: MuZeroConfig) -> MuZeroNet:
     if network_kind(spec, cfg) == "conv":
         h, w, c = spec.obs_shape
         return ConvNet((h, w, c), spec.num_actions, cfg.conv_channels, cfg.conv_blocks,
-                       cfg.conv_head_channels, hidden, va, ra, stem=cfg.conv_stem)
+                       cfg.conv_head_channels, hidden, va, ra,
+                       downsample_blocks=tuple(int(b) for b in cfg.conv_downsample_blocks), stem=cfg.conv_stem)
     obs_dim = int(np.prod(spec.obs_shape))
     return MLPNet(obs_dim, spec.num_actions, cfg.latent_dim, hidden, va, ra)
 

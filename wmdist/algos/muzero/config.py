@@ -30,6 +30,9 @@ class MuZeroConfig:
     conv_stem: str = param("atari", "conv: representation input stage: atari = the paper's downsampling (96x96 -> 6x6); "
                                     "grid = one 3x3 conv at full resolution (small grids such as MinAtar's 10x10)",
                            choices=("atari", "grid"))
+    conv_downsample_blocks: list[int] = param(
+        [2, 3, 3], "conv, atari stem: residual blocks in the three stages of the 96 -> 6 downsampling (paper: 2, 3, 3)",
+        ge=0)
     value_support: int = param(300, "value atoms cover the integers [-S, S] after h(x) (paper: 300)", ge=1)
     reward_support: int = param(300, "reward atoms cover the integers [-S, S] after h(x) (paper: 300)", ge=1)
 
@@ -59,6 +62,8 @@ class MuZeroConfig:
         if self.search.value_prefix and not self.has_value_prefix_net():
             raise ValueError("algo.search.value_prefix needs a network with a value-prefix head (LSTM); "
                              "muzero's has none (use algo.name: efficientzero)")
+        if len(self.conv_downsample_blocks) != 3:
+            raise ValueError(f"algo.conv_downsample_blocks needs 3 entries, got {self.conv_downsample_blocks}")
         if len(self.visit_temperatures) != len(self.temperature_env_steps) + 1:
             raise ValueError(
                 f"algo.visit_temperatures needs one more entry than algo.temperature_env_steps, got "
