@@ -28,7 +28,6 @@ def test_preset_is_the_muzero_one_plus_the_three_additions(game):
     assert a.search.num_simulations == mz.algo.search.num_simulations
 
 
-
 @pytest.mark.parametrize("game", ["breakout", "asterix"])
 def test_network_is_the_muzero_presets_network(game):
     """The built network, not just the config fields: EfficientZero once ignored `conv_stem`
@@ -38,7 +37,8 @@ def test_network_is_the_muzero_presets_network(game):
     spec = env_spec(ez.env)
     net, ref = build_net(spec, ez.algo), build_muzero_net(spec, mz.algo)
     obs = torch.zeros((2, *spec.obs_shape), dtype=torch.uint8)
-    net.eval(), ref.eval()
+    net.eval()
+    ref.eval()
     with torch.no_grad():
         assert net.represent(obs).shape == ref.represent(obs).shape == (2, mz.algo.conv_channels, 10, 10)
     shapes = {k: tuple(v.shape) for k, v in net.base.state_dict().items()}
