@@ -9,6 +9,7 @@ debugger can step through an update.
 """
 from __future__ import annotations
 
+import sys
 from typing import Any
 
 
@@ -55,6 +56,16 @@ class LocalHandle:
 
 def is_local(x: Any) -> bool:
     return isinstance(x, (Ready, LocalHandle))
+
+
+def actor_died() -> tuple[type[BaseException], ...]:
+    """What a call raises when its actor is gone, for `except actor_died():`.
+
+    Ray's `RayActorError` once Ray is loaded; nothing before, since no actor can have died
+    then. So the local runner never imports Ray (the CUDA check runs where Ray is absent).
+    """
+    exceptions = sys.modules.get("ray.exceptions")
+    return (exceptions.RayActorError,) if exceptions is not None else ()
 
 
 def get(refs: Any, timeout: float | None = None) -> Any:

@@ -28,7 +28,6 @@ import secrets
 import threading
 
 import numpy as np
-from ray.exceptions import RayActorError
 
 from wmdist.algos.base import FieldSpec
 from wmdist.replay.batch import Sample, SequenceBatch, make_keys, split_keys, step_ages
@@ -48,7 +47,7 @@ from wmdist.replay.storage_redis import (
 )
 from wmdist.replay.shm import drop as drop_segment
 from wmdist.replay.shm import keep_with_process, segment_prefix, sweep
-from wmdist.runtime.calls import LocalHandle, get, kill
+from wmdist.runtime.calls import LocalHandle, actor_died, get, kill
 from wmdist.runtime.replay_shm import ShmPath, StaleSegment, node_id
 
 
@@ -156,7 +155,7 @@ class ReplayClient:
             if not free:
                 self._flush_counts()  # the limiter decides on every count this copy made
             ok, version = (True, -1) if free else get(self.limiter.acquire_insert.remote(n, timeout))
-        except RayActorError:
+        except actor_died():
             return False  # the service was shut down
         if not ok:
             return False
@@ -236,7 +235,7 @@ class ReplayClient:
             if (not limited and not drawn
                     and sum(m[0] for m in get([s.mass.remote() for s in self.shards])) == 0):
                 return None
-        except RayActorError:
+        except actor_died():
             return None
         try:
             if self.direct:
@@ -247,7 +246,7 @@ class ReplayClient:
                 except StaleSegment:  # a shard recreated its segment: this once by call, then map again
                     self._drop_shm()
             return self._sample(batch_size)
-        except RayActorError:
+        except actor_died():
             return None  # the service was shut down
         finally:
             self._batches += int(limited)  # beta counts the batches before this one
