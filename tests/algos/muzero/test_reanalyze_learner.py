@@ -10,6 +10,7 @@ from tests.algos.muzero.helpers import random_batch
 from tests.algos.muzero.loop import InProcessLoop
 from wmdist.algos.base import NonFiniteLoss
 from wmdist.algos.muzero import MuZero, MuZeroConfig
+from wmdist.algos.muzero.reanalyzer import ROOT_BUCKET
 from wmdist.envs.config import EnvConfig
 from wmdist.envs.spec import EnvSpec
 from wmdist.envs.factory import env_spec
@@ -46,6 +47,29 @@ def test_reanalyze_with_the_same_weights_reproduces_greedy_search():
     loop.learner.update(random_batch(np.random.default_rng(1), 8, 12, 2, obs_dim=4))
     re.set_weights(loop.learner.get_weights(), 2)
     assert not np.allclose(re.reanalyze(batch)["search_value"][acting], batch["search_value"][acting])
+
+
+def test_reanalyze_searches_padded_batches_and_chunking_leaves_the_targets_unchanged():
+    """Every search call gets a multiple of ROOT_BUCKET roots (its cached workspace is reused
+    instead of a fresh buffer per call), and the padding roots change no real root's target."""
+    env = EnvConfig(id="gym:CartPole-v1")
+    algo = _algo(env_spec(env), reanalyze_noise=False)
+    loop = InProcessLoop(algo, env, num_envs=4, seq_len=12, overlap=2)
+    loop.collect(30, explore=False)
+    batch = loop.sample(12)
+    re = algo.make_reanalyzer()
+    re.set_weights(loop.learner.get_weights(), 1)
+    sizes, run = [], re.searcher.run
+    re.searcher.run = lambda obs, *a, **k: (sizes.append(len(obs)), run(obs, *a, **k))[1]
+    whole = re.reanalyze(batch)
+    acting = int((batch["mask"].astype(bool) & ~batch["last"]).sum())
+    assert acting > ROOT_BUCKET and sizes == [-(-acting // ROOT_BUCKET) * ROOT_BUCKET]
+    sizes.clear()
+    re.max_roots = ROOT_BUCKET
+    chunked = re.reanalyze(batch)
+    assert len(sizes) == -(-acting // ROOT_BUCKET) and set(sizes) == {ROOT_BUCKET}
+    for k in ("search_policy", "search_value"):
+        np.testing.assert_allclose(chunked[k], whole[k], atol=1e-6)
 
 
 def test_reanalyze_noise_keeps_every_legal_action_in_the_targets_of_a_peaked_prior():

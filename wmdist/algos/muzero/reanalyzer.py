@@ -13,10 +13,16 @@ from wmdist.algos.muzero.searcher import Searcher
 from wmdist.algos.muzero.targets import acting_steps
 from wmdist.envs.spec import EnvSpec
 
+# Search calls get batches padded to a multiple of this. The search's workspaces
+# ([B, nodes, latent words], wmdist/search/workspace.py) are cached by B, and the number of
+# stored steps differs in every sampled batch: unpadded, each call allocated a fresh buffer
+# of ~200 MB (1,000 MinAtar roots) and the reanalyzer's memory swung between 4 and 7 GB.
+ROOT_BUCKET = 64
+
 
 class MuZeroReanalyzer(Reanalyzer):
     def __init__(self, net: MuZeroNet, cfg: MuZeroConfig, spec: EnvSpec, seed: int, device: str = "cpu",
-                 max_roots: int = 1024) -> None:
+                 max_roots: int = 256) -> None:
         self.cfg, self.spec = cfg, spec
         self.device = torch.device(device)
         self.net = net.to(self.device).eval()
@@ -38,12 +44,13 @@ class MuZeroReanalyzer(Reanalyzer):
         a = self.spec.num_actions
         policy, value = np.zeros((len(r), a), np.float32), np.zeros(len(r), np.float32)
         for lo in range(0, len(r), self.max_roots):
-            rr, cc = r[lo:lo + self.max_roots], c[lo:lo + self.max_roots]
+            rr, cc = pad_roots(r[lo:lo + self.max_roots], c[lo:lo + self.max_roots])
+            n = min(self.max_roots, len(r) - lo)  # the real roots; the rest repeat the last one
             legal = batch["legal"][rr, cc].astype(bool) if "legal" in batch else np.ones((len(rr), a), bool)
             to_play = batch["to_play"][rr, cc].astype(np.int64) if self.two_player and "to_play" in batch else None
             res = self.searcher.run(batch["obs"][rr, cc], legal, to_play, self.rng, add_noise=add_noise)
-            policy[lo:lo + len(rr)] = res.policy_target
-            value[lo:lo + len(rr)] = res.root_value
+            policy[lo:lo + n] = res.policy_target[:n]
+            value[lo:lo + n] = res.root_value[:n]
         return policy, value
 
     def reanalyze(self, batch: Batch) -> dict[str, np.ndarray]:
@@ -59,3 +66,11 @@ class MuZeroReanalyzer(Reanalyzer):
         # action, so the policy target sharpens the prior further until it collapses.
         policy[r, c], value[r, c] = self.search_at(batch, r, c, add_noise=self.cfg.reanalyze_noise)
         return {"search_policy": policy, "search_value": value}
+
+
+def pad_roots(r: np.ndarray, c: np.ndarray, bucket: int = ROOT_BUCKET) -> tuple[np.ndarray, np.ndarray]:
+    """(r, c) [N] extended to a multiple of `bucket` by repeating the last root."""
+    pad = -len(r) % bucket
+    if pad == 0:
+        return r, c
+    return np.concatenate([r, np.repeat(r[-1:], pad)]), np.concatenate([c, np.repeat(c[-1:], pad)])
