@@ -8,7 +8,7 @@ from typing import IO
 
 from wmdist.config.errors import ConfigError, closest
 
-BENCHES = ("mcts", "replay", "selfplay", "dreamer", "envs", "planner", "cmaes", "goal_planner")
+BENCHES = ("mcts", "replay", "selfplay", "dreamer", "envs", "planner", "cmaes", "goal_planner", "reanalyze")
 LONG = ("soak",)  # run by name only: not part of `all`
 
 
