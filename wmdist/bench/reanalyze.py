@@ -8,7 +8,7 @@ of `ROOT_BUCKET` (64). The `unpadded` case is the old path (one call of any size
 
 Each case runs in its own process (peak RSS is per process), on the EfficientZero MinAtar
 Breakout preset's network (random weights, 16 simulations, root noise on) with random 10x10
-grids, one torch thread, for `calls` calls of 600-960 roots each; the first two calls (numba's
+grids, one torch thread, for `calls` calls (12) of 600-960 roots each; the first two calls (numba's
 compilation) are not timed. The cases alternate, `rounds` times each, so load affects both.
 """
 from __future__ import annotations
@@ -65,7 +65,7 @@ def measure(case: str, calls: int, roots: tuple[int, int] = (600, 960)) -> dict:
 
 def run(quick: bool = False) -> Iterator[dict]:
     # quick (the test's): a few small calls, to show the bench runs; the figures need the full one
-    calls, rounds, roots = (3, 1, (40, 100)) if quick else (25, 2, (600, 960))
+    calls, rounds, roots = (3, 1, (40, 100)) if quick else (12, 2, (600, 960))
     for round_ in range(rounds):
         for case in ("unpadded", "padded"):
             r = measure(case, calls, roots)
