@@ -25,7 +25,6 @@ CHILD = r"""
 import json, resource, sys, time
 import numpy as np, torch
 torch.set_num_threads(1)
-from wmdist.algos.muzero import reanalyzer as mz
 from wmdist.config.loader import load_config
 from wmdist.envs.factory import env_spec
 from wmdist.runtime.malloc import tune_malloc
@@ -37,8 +36,7 @@ cfg = load_config(preset, [])
 spec = env_spec(cfg.env)
 re = build_algorithm(cfg, spec, 0).make_reanalyzer("cpu")
 if case == "unpadded":
-    re.max_roots = 1024
-    mz.pad_roots.__defaults__ = (1,)
+    re.max_roots, re.root_bucket = 1024, 1
 rng = np.random.default_rng(0)
 B, T = 16, 60  # a reanalyze batch: 16 windows of 50 + 10 overlap
 batch = {"obs": rng.integers(0, 2, (B, T) + tuple(spec.obs_shape)).astype(np.uint8)}

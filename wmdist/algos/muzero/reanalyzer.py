@@ -31,6 +31,7 @@ class MuZeroReanalyzer(Reanalyzer):
                                  self.two_player, self.device)
         self.rng = np.random.default_rng(seed)
         self.max_roots = max_roots  # roots per search call (bounds the tree's memory)
+        self.root_bucket = ROOT_BUCKET  # search batches padded to a multiple of this (1: unpadded)
         self.version = -1
 
     def set_weights(self, weights: Weights, version: int) -> None:
@@ -44,8 +45,9 @@ class MuZeroReanalyzer(Reanalyzer):
         a = self.spec.num_actions
         policy, value = np.zeros((len(r), a), np.float32), np.zeros(len(r), np.float32)
         for lo in range(0, len(r), self.max_roots):
-            rr, cc = pad_roots(r[lo:lo + self.max_roots], c[lo:lo + self.max_roots])
-            n = min(self.max_roots, len(r) - lo)  # the real roots; the rest repeat the last one
+            rr, cc = r[lo:lo + self.max_roots], c[lo:lo + self.max_roots]
+            n = len(rr)  # the real roots; padding repeats the last one
+            rr, cc = pad_roots(rr, cc, self.root_bucket)
             legal = batch["legal"][rr, cc].astype(bool) if "legal" in batch else np.ones((len(rr), a), bool)
             to_play = batch["to_play"][rr, cc].astype(np.int64) if self.two_player and "to_play" in batch else None
             res = self.searcher.run(batch["obs"][rr, cc], legal, to_play, self.rng, add_noise=add_noise)
@@ -68,7 +70,7 @@ class MuZeroReanalyzer(Reanalyzer):
         return {"search_policy": policy, "search_value": value}
 
 
-def pad_roots(r: np.ndarray, c: np.ndarray, bucket: int = ROOT_BUCKET) -> tuple[np.ndarray, np.ndarray]:
+def pad_roots(r: np.ndarray, c: np.ndarray, bucket: int) -> tuple[np.ndarray, np.ndarray]:
     """(r, c) [N] extended to a multiple of `bucket` by repeating the last root."""
     pad = -len(r) % bucket
     if pad == 0:
