@@ -18,6 +18,7 @@ import argparse
 import json
 import sys
 import time
+import traceback
 from pathlib import Path
 
 CONFIGS = Path(__file__).parents[2] / "configs"
@@ -114,6 +115,7 @@ def main(argv: list[str] | None = None) -> int:
                 out = check_preset(name, args.seconds, args.device)
             except Exception as e:  # one preset's failure must not hide the others'
                 out = {"preset": name, "ok": False, "error": f"{type(e).__name__}: {e}"[:300]}
+                traceback.print_exc(file=sys.stderr)  # stdout stays one JSON line per preset; the stack goes to stderr
         if out["ok"] is False:
             failed.append(name)
         results.append(out)

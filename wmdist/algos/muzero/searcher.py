@@ -34,8 +34,12 @@ class Searcher:
         self.two_player = two_player
         self.device = device
         self._net_seconds = 0.0
-        # the MLP network's recurrent call as flat functional ops (bit-identical, ~2x cheaper); None: the module path
-        self.fast = FastMLPInference.build(net, value_support, reward_support)
+        # the tree keeps every node's latent in host memory (wmdist.search.latents): on an accelerator
+        # each simulation moves the gathered [B, ...] latents in and the new ones back out
+        self.on_host = torch.device(device).type == "cpu"
+        # the MLP network's recurrent call as flat functional ops (bit-identical, ~2x cheaper on the CPU);
+        # None: the module path
+        self.fast = FastMLPInference.build(net, value_support, reward_support) if self.on_host else None
         if cfg.value_prefix and not net.has_value_prefix:
             raise ValueError("algo.search.value_prefix needs a network with a value-prefix head (algo.name: efficientzero)")
 
@@ -44,7 +48,7 @@ class Searcher:
         starts from zeros where `reset` [B] (the parent's depth is a multiple of the horizon)."""
         t = time.perf_counter()
         with torch.no_grad():
-            s, h, c = latents
+            s, h, c = (self._in(x) for x in latents)
             keep = torch.as_tensor(~np.asarray(reset, bool), device=self.device)[:, None].to(h.dtype)  # [B, 1]
             a = torch.as_tensor(np.asarray(actions), dtype=torch.int64, device=self.device)
             nxt, (h2, c2), prefix_logits, p_logits, v_logits = self.net.recurrent_inference_prefix(
@@ -53,7 +57,7 @@ class Searcher:
             value = support_to_scalar(v_logits.float(), self.value_support).cpu().numpy()
             logits = p_logits.float().cpu().numpy()
         self._net_seconds += time.perf_counter() - t
-        return prefix, value, logits, (nxt, h2, c2)
+        return prefix, value, logits, (self._out(nxt), self._out(h2), self._out(c2))
 
     def _recurrent(self, latents: torch.Tensor, actions: np.ndarray):
         t = time.perf_counter()
@@ -63,12 +67,20 @@ class Searcher:
             return out
         with torch.no_grad():
             a = torch.as_tensor(np.asarray(actions), dtype=torch.int64, device=self.device)
-            nxt, r_logits, p_logits, v_logits = self.net.recurrent_inference(latents, a)
+            nxt, r_logits, p_logits, v_logits = self.net.recurrent_inference(self._in(latents), a)
             reward = support_to_scalar(r_logits.float(), self.reward_support).cpu().numpy()
             value = support_to_scalar(v_logits.float(), self.value_support).cpu().numpy()
             logits = p_logits.float().cpu().numpy()
         self._net_seconds += time.perf_counter() - t
-        return reward, value, logits, nxt
+        return reward, value, logits, self._out(nxt)
+
+    def _in(self, x: torch.Tensor) -> torch.Tensor:
+        """A gathered host latent onto the network's device (a no-op on the CPU)."""
+        return x if self.on_host else x.to(self.device, non_blocking=True)
+
+    def _out(self, x: torch.Tensor) -> torch.Tensor:
+        """A new latent into host memory for the tree (a no-op on the CPU)."""
+        return x if self.on_host else x.cpu()
 
     @torch.no_grad()
     def run(self, obs: np.ndarray, legal: np.ndarray, to_play: np.ndarray | None, rng: np.random.Generator,
@@ -83,6 +95,7 @@ class Searcher:
         fn = self._recurrent
         if self.cfg.value_prefix:  # the LSTM state lives with each node's latent in the tree
             latent, fn = (latent, *self.net.initial_state(len(obs_t), self.device)), self._recurrent_prefix
+        latent = tuple(self._out(x) for x in latent) if isinstance(latent, tuple) else self._out(latent)
         out = search(latent, root_logits, root_value, legal, to_play, fn, self.cfg, rng,
                      temperature=temperature, add_noise=add_noise, two_player=self.two_player)
         counts = np.asarray(out.visit_counts, dtype=np.float32)

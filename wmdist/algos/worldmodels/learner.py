@@ -87,7 +87,7 @@ class WorldModelsLearner(Learner):
         mask = np.asarray(batch["mask"], bool)  # [B, T]
         frames = np.asarray(batch["obs"])[mask]  # [N, 64, 64, C] real steps only (a copy, writable)
         if self.cfg.vae_frames and len(frames) > self.cfg.vae_frames:
-            idx = torch.randperm(len(frames), generator=self.generator)[: self.cfg.vae_frames].numpy()
+            idx = torch.randperm(len(frames), generator=self.generator, device=self.device)[: self.cfg.vae_frames].cpu().numpy()
             frames = frames[np.sort(idx)]
         return torch.as_tensor(frames, device=self.device)
 
