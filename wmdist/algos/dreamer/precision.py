@@ -104,7 +104,7 @@ class PhasePrecision:
                 self.choice[phase] = "bf16" if t16 < t32 else "fp32"
                 metrics[f"precision_{phase}_fp32_s"] = t32
                 metrics[f"precision_{phase}_bf16_s"] = t16
-            log.info("dreamer precision chosen: %s (%s)", self.describe(),
+            log.info("learner precision chosen: %s (%s)", self.describe(),
                      ", ".join(f"{k}={v:.3f}s" for k, v in metrics.items() if k.startswith("precision_")))
         return metrics
 

@@ -13,6 +13,7 @@ import numpy as np
 import torch
 
 from wmdist.algos.base import Batch, Learner, NonFiniteLoss, UpdateResult, Weights
+from wmdist.algos.dreamer.precision import PhasePrecision
 from wmdist.algos.planet.config import PlaNetConfig
 from wmdist.algos.planet.overshooting import overshooting_kl
 from wmdist.envs.spec import EnvSpec
@@ -33,6 +34,9 @@ class PlaNetLearner(Learner):
                                                                  clip_norm=cfg.model_clip))
         self.generator = torch.Generator(self.device).manual_seed(seed)
         self.updates = 0
+        # PlaNet's update is Dreamer's world-model phase alone: the actor-critic phase stays fixed (unused)
+        self.precision = PhasePrecision({"world_model": cfg.precision, "actor_critic": "fp32"}, self.device,
+                                        cfg.precision_trials)
 
     def loss(self, batch: Batch) -> tuple[torch.Tensor, dict[str, float]]:
         """The world-model loss of one batch and its parts (floats) for logging."""
@@ -68,10 +72,14 @@ class PlaNetLearner(Learner):
 
     # --- Learner API ----------------------------------------------------------------
     def update(self, batch: Batch) -> UpdateResult:
-        loss, metrics = self.loss(batch)
+        prec, spent = self.precision, {}  # spent: seconds of the phase while auto is measuring
+        with prec.timed("world_model", spent), prec.autocast("world_model"):
+            loss, metrics = self.loss(batch)
         if not torch.isfinite(loss.detach()).all():
             raise NonFiniteLoss(f"planet model loss is {float(loss.detach())}")
-        metrics["model_grad_norm"] = self.opt(loss)
+        with prec.timed("world_model", spent):
+            metrics["model_grad_norm"] = self.opt(loss)
+        metrics.update({k: v for k, v in prec.end_update(spent).items() if "actor_critic" not in k})
         self.updates += 1
         return UpdateResult(metrics=metrics)
 
@@ -80,10 +88,11 @@ class PlaNetLearner(Learner):
 
     def state_dict(self) -> dict[str, Any]:
         return {"wm": self.wm.state_dict(), "opt": self.opt.state_dict(), "generator": self.generator.get_state(),
-                "updates": self.updates}
+                "updates": self.updates, "precision": self.precision.state_dict()}
 
     def load_state_dict(self, state: Mapping[str, Any]) -> None:
         self.wm.load_state_dict(state["wm"])
         self.opt.load_state_dict(state["opt"])
         self.generator.set_state(torch.as_tensor(state["generator"]))
         self.updates = int(state["updates"])
+        self.precision.load_state_dict(state.get("precision", {}))  # older checkpoints: measure again
