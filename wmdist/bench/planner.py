@@ -11,9 +11,14 @@ the rest is the planner's sampling, top-K and refits; `ms_per_call` = one batche
 `env_steps_45min` = the env steps 45 minutes of such planning would take. `*_cpu` fields
 divide by this thread's CPU time instead of wall time: what planning costs when the machine
 is shared with other processes, which only deschedule it.
+
+One more case, `learner_precision`: the state preset's learner (batch 50 x 50) updating in
+fp32 and in bf16, interleaved on one thread, as the preset's `precision: auto` compares them
+at start-up; where the CPU has no native bf16 it is reported and not timed (it is far slower).
 """
 from __future__ import annotations
 
+import dataclasses
 import time
 from pathlib import Path
 from typing import Iterator
@@ -65,6 +70,24 @@ def time_planner(planner: CEMConfig, envs: int, min_seconds: float, min_calls: i
             "ms_per_call_cpu": 1e3 * cpu / calls, "decisions_per_cpu_s": envs * calls / cpu}
 
 
+def learner_precision(updates: int) -> dict:
+    """Seconds per update of the state preset's learner in fp32 and in bf16, interleaved."""
+    from wmdist.algos.dreamer.precision import native_bf16
+    from wmdist.bench.dreamer import _time_side_by_side, random_batch
+    from wmdist.config.loader import load_config
+
+    cfg = load_config(str(PRESET))
+    row = {"case": "learner_precision", "batch": f"{cfg.learner.batch_size}x{cfg.replay.seq_len}",
+           "native_bf16": native_bf16(torch.device("cpu")), "threads": 1}
+    if not row["native_bf16"]:
+        return row
+    learners = {p: PlaNet(SPEC, dataclasses.replace(cfg.algo, precision=p), 0).make_learner() for p in ("fp32", "bf16")}
+    batch = random_batch(SPEC, cfg.learner.batch_size, cfg.replay.seq_len)
+    times = _time_side_by_side(learners, batch, updates)
+    return {**row, "seconds_per_update_fp32": round(times["fp32"], 4), "seconds_per_update_bf16": round(times["bf16"], 4),
+            "bf16_speedup": round(times["fp32"] / times["bf16"], 2)}
+
+
 def run(quick: bool = False) -> Iterator[dict]:
     threads = torch.get_num_threads()
     torch.set_num_threads(1)
@@ -80,5 +103,6 @@ def run(quick: bool = False) -> Iterator[dict]:
                     "env_steps_45min": int(r["decisions_per_s"] * 45 * 60),
                     "env_steps_45min_cpu": int(r["decisions_per_cpu_s"] * 45 * 60), "threads": 1,
                 }
+        yield learner_precision(1 if quick else 6)
     finally:
         torch.set_num_threads(threads)

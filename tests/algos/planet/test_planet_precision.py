@@ -51,3 +51,16 @@ def test_a_bf16_update_stays_within_sampling_noise_of_fp32():
     noise = fp32.std(0) + 1e-3 * np.abs(fp32.mean(0))
     gap = np.abs(bf16 - fp32).mean(0)
     assert np.all(gap < 3 * noise + 0.02 * np.abs(fp32.mean(0)) + 1e-4), (gap, noise)
+
+
+def test_the_bench_times_both_precisions_where_bf16_is_native():
+    from wmdist.algos.dreamer.precision import native_bf16
+    from wmdist.bench.planner import learner_precision
+
+    row = learner_precision(1)
+    assert row["case"] == "learner_precision" and row["batch"] == "50x50"
+    if native_bf16(torch.device("cpu")):
+        assert row["seconds_per_update_fp32"] > 0 and row["seconds_per_update_bf16"] > 0
+        assert row["bf16_speedup"] == round(row["seconds_per_update_fp32"] / row["seconds_per_update_bf16"], 2)
+    else:  # not timed: bf16 without native support is far slower, and auto never picks it
+        assert "bf16_speedup" not in row

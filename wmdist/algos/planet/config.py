@@ -36,7 +36,7 @@ class PlaNetConfig:
     adam_eps: float = param(1e-4, "Adam epsilon (PlaNet: 1e-4)", gt=0)
     model_clip: float = param(1000.0, "gradient norm clip (PlaNet: 1000)", ge=0)
     # the update is one world-model phase; bf16 pays only where matmuls are native (AVX-512 BF16 / AMX, CUDA):
-    # 1.41x faster at the preset's sizes on an AVX-512 BF16 EPYC (BENCHMARKS: PlaNet)
+    # 1.26-1.41x faster at the preset's sizes on an AVX-512 BF16 EPYC (`wmdist bench planner`, learner_precision)
     precision: str = param("fp32", "learner precision: fp32, bf16, or auto (the first updates timed in each, the "
                                    "faster kept; fp32 without native bf16)", choices=("fp32", "bf16", "auto"))
     precision_trials: int = param(2, "auto: timed updates per precision after one warm-up update in each", ge=1)
