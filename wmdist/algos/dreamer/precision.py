@@ -1,6 +1,6 @@
-"""Per-phase precision of the Dreamer update: fp32, bf16, or `auto` (measured at start-up).
+"""Per-phase precision of a learner's update: fp32, bf16, or `auto` (measured at start-up).
 
-An update has two phases that pay differently for bf16: the world model (one observe loop
+The phases are the keys of the modes a learner passes in. Dreamer's update has two phases that pay differently for bf16: the world model (one observe loop
 over [B, T], matmul-heavy) and imagination with the actor-critic (H steps over N starts,
 with a backward through the dynamics for continuous actions). `auto` runs the first updates
 alternately in fp32 and bf16, times each phase (forward + its backward and optimiser step),
@@ -16,7 +16,7 @@ from typing import Any, Callable, ContextManager, Mapping
 
 import torch
 
-PHASES = ("world_model", "actor_critic")
+PHASES = ("world_model", "actor_critic")  # Dreamer's; PlaNet's update is the world model alone
 MODES = ("fp32", "bf16", "auto")
 
 log = logging.getLogger(__name__)
@@ -38,7 +38,8 @@ class PhasePrecision:
                  clock: Callable[[], float] | None = None) -> None:
         import time
 
-        for phase in PHASES:
+        self.phases = tuple(modes)
+        for phase in self.phases:
             if modes[phase] not in MODES:
                 raise ValueError(f"precision of {phase} must be one of {MODES}, got {modes[phase]!r}")
         self.device, self.trials = device, trials
@@ -46,18 +47,18 @@ class PhasePrecision:
         ok = native_bf16(device) if bf16_ok is None else bf16_ok
         # the fixed choice per phase; an `auto` phase is absent until measured
         self.choice: dict[str, str] = {}
-        for phase in PHASES:
+        for phase in self.phases:
             if modes[phase] != "auto":
                 self.choice[phase] = modes[phase]
             elif not ok:
                 self.choice[phase] = "fp32"
         self.reason = "" if ok else "no native bf16 on this device"
-        self.seconds: dict[str, dict[str, list[float]]] = {p: {"fp32": [], "bf16": []} for p in PHASES}
+        self.seconds: dict[str, dict[str, list[float]]] = {p: {"fp32": [], "bf16": []} for p in self.phases}
         self._step = 0  # measured updates so far
 
     @property
     def measuring(self) -> bool:
-        return len(self.choice) < len(PHASES)
+        return len(self.choice) < len(self.phases)
 
     def _trial(self) -> str:
         """The precision this trial update runs in: fp32, bf16, fp32, ... (the first of each is warm-up)."""
@@ -88,7 +89,7 @@ class PhasePrecision:
     def end_update(self, spent: Mapping[str, float]) -> dict[str, float]:
         """Records one update's phase times; returns metrics (the precision each phase used as
         0/1, and on the update that fixes a choice, the mean seconds of each precision)."""
-        metrics = {f"bf16_{p}": float(self.mode(p) == "bf16") for p in PHASES}
+        metrics = {f"bf16_{p}": float(self.mode(p) == "bf16") for p in self.phases}
         if not self.measuring:
             return metrics
         trial = self._trial()
@@ -97,7 +98,7 @@ class PhasePrecision:
                 self.seconds[phase][trial].append(s)
         self._step += 1
         if self._step >= 2 * (self.trials + 1):
-            for phase in PHASES:
+            for phase in self.phases:
                 if phase in self.choice:
                     continue
                 t32, t16 = (sum(v) / len(v) for v in (self.seconds[phase]["fp32"], self.seconds[phase]["bf16"]))
@@ -109,7 +110,7 @@ class PhasePrecision:
         return metrics
 
     def describe(self) -> str:
-        return " ".join(f"{p}={self.choice.get(p, 'measuring')}" for p in PHASES) + (f" ({self.reason})" if self.reason else "")
+        return " ".join(f"{p}={self.choice.get(p, 'measuring')}" for p in self.phases) + (f" ({self.reason})" if self.reason else "")
 
     def state_dict(self) -> dict[str, Any]:
         return {"choice": dict(self.choice)}

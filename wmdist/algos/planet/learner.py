@@ -34,9 +34,8 @@ class PlaNetLearner(Learner):
                                                                  clip_norm=cfg.model_clip))
         self.generator = torch.Generator(self.device).manual_seed(seed)
         self.updates = 0
-        # PlaNet's update is Dreamer's world-model phase alone: the actor-critic phase stays fixed (unused)
-        self.precision = PhasePrecision({"world_model": cfg.precision, "actor_critic": "fp32"}, self.device,
-                                        cfg.precision_trials)
+        # PlaNet's update is Dreamer's world-model phase alone
+        self.precision = PhasePrecision({"world_model": cfg.precision}, self.device, cfg.precision_trials)
 
     def loss(self, batch: Batch) -> tuple[torch.Tensor, dict[str, float]]:
         """The world-model loss of one batch and its parts (floats) for logging."""
@@ -79,7 +78,7 @@ class PlaNetLearner(Learner):
             raise NonFiniteLoss(f"planet model loss is {float(loss.detach())}")
         with prec.timed("world_model", spent):
             metrics["model_grad_norm"] = self.opt(loss)
-        metrics.update({k: v for k, v in prec.end_update(spent).items() if "actor_critic" not in k})
+        metrics.update(prec.end_update(spent))
         self.updates += 1
         return UpdateResult(metrics=metrics)
 
