@@ -15,12 +15,13 @@ def mlp(
     act: str = "relu",
     norm: bool = False,
     out_init_zero: bool = False,
+    dropout: float = 0.0,
 ) -> nn.Sequential:
     """Linear -> [LayerNorm] -> act for each hidden width, then an optional linear output.
 
     norm=True gives DreamerV3's LayerNorm + SiLU blocks (bias dropped before the norm).
     out_init_zero starts the output layer at zero (e.g. reward/value heads that should
-    predict 0 at initialisation).
+    predict 0 at initialisation). dropout > 0 follows each hidden activation (train mode only).
     """
     if act not in ACTIVATIONS:
         raise ValueError(f"unknown activation {act!r}; choose one of {sorted(ACTIVATIONS)}")
@@ -31,6 +32,8 @@ def mlp(
         if norm:
             layers.append(nn.LayerNorm(h, eps=1e-3))
         layers.append(ACTIVATIONS[act]())
+        if dropout > 0:
+            layers.append(nn.Dropout(dropout))
         d = h
     if out_dim is not None:
         out = nn.Linear(d, out_dim)

@@ -56,3 +56,17 @@ def test_predictor_loss_falls_on_deterministic_dynamics_from_collected_data():
     # embeddings keep unit scale (BatchNorm projector, SIGReg), so a smaller MSE is a better predictor
     assert end < 0.5 * start, (start, end)
     assert rank > 3.0  # not collapsed onto a line
+
+
+def test_predictor_dropout_acts_while_training_and_is_off_when_planning():
+    from wmdist.algos.jepa.model import JepaModel
+    torch.manual_seed(0)
+    model = JepaModel(small_config(pred_dropout=0.5), action_dim=2)
+    assert any(isinstance(m, torch.nn.Dropout) for m in model.predictor)
+    z, a = torch.randn(16, 1, 8), torch.randn(16, 1, 2)  # [N, h, D], [N, h, A]
+    model.train()
+    assert not torch.allclose(model.predict(z, a), model.predict(z, a))  # a fresh mask per call
+    model.eval()
+    torch.testing.assert_close(model.predict(z, a), model.predict(z, a))
+    plain = JepaModel(small_config(), action_dim=2)
+    assert not any(isinstance(m, torch.nn.Dropout) for m in plain.predictor)  # default 0: no layer at all

@@ -24,6 +24,8 @@ class JepaConfig:
                          ge=1)
     pred_hidden: int = param(256, "hidden width of the predictor MLP (LeWM: a 6-layer transformer)", ge=1)
     pred_layers: int = param(2, "hidden layers of the predictor MLP", ge=1)
+    pred_dropout: float = param(0.0, "dropout after each hidden layer of the predictor while training (LeWM: 0.1); "
+                                     "off when planning", ge=0, lt=1)
     act: str = param("silu", "activation", choices=("elu", "silu", "relu", "tanh"))
     # --- loss -------------------------------------------------------------------------
     sigreg_weight: float = param(0.09, "lambda of MSE + lambda x SIGReg (LeWM: 0.09); 0 = the collapse ablation", ge=0)

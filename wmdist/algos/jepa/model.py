@@ -41,7 +41,7 @@ class JepaModel(nn.Module):
         self.conv = ConvEncoder(FRAME_CHANNELS, cfg.cnn_depth, cfg.act, norm=True)
         self.projector = Projector(self.conv.out_dim, cfg.proj_hidden, cfg.embed_dim, cfg.act)
         self.predictor = mlp(cfg.history * (cfg.embed_dim + action_dim), [cfg.pred_hidden] * cfg.pred_layers,
-                             cfg.embed_dim, cfg.act, norm=True)
+                             cfg.embed_dim, cfg.act, norm=True, dropout=cfg.pred_dropout)
 
     def encode(self, frames: torch.Tensor) -> torch.Tensor:
         """uint8 [..., 64, 64, 3] -> embeddings [..., D]."""

@@ -30,6 +30,8 @@ class WorldModelsConfig:
     rnn_clip: float = param(1.0, "gradient norm clip of M (authors' code: 1.0)", ge=0)
     done_weight: float = param(1.0, "weight of M's done-head cross-entropy", ge=0)
     rnn_updates: int = param(1000, "stage 2: M updates before the controller search", ge=0)
+    latent_cache: int = param(0, "stage 2: replayed windows whose V encodings the learner keeps, so a window "
+                                 "replayed again is not encoded again (0 = encode every batch)", ge=0)
     temperature: float = param(1.0, "tau: M's sampling temperature in the dream (paper, Doom: 1.15)")
     # --- C and CMA-ES ----------------------------------------------------------------------
     popsize: int = param(64, f"CMA-ES population (paper: 64; cma needs >= {MIN_POPSIZE})")

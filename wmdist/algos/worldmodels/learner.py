@@ -20,6 +20,7 @@ from wmdist.algos.base import Batch, Learner, NonFiniteLoss, UpdateResult, Weigh
 from wmdist.algos.worldmodels.cmaes import CMAES
 from wmdist.algos.worldmodels.config import WorldModelsConfig
 from wmdist.algos.worldmodels.controller import num_params
+from wmdist.algos.worldmodels.latent_cache import LatentCache
 from wmdist.algos.worldmodels.mdn import mdn_log_prob
 from wmdist.algos.worldmodels.models import build_rnn, build_vae, to_numpy
 from wmdist.algos.worldmodels.pool import EvalPool
@@ -47,6 +48,7 @@ class WorldModelsLearner(Learner):
         self.bank_logvar = np.zeros((0, cfg.z_dim), np.float32)
         self.updates = 0
         self.pool: EvalPool | None = None
+        self.latents = LatentCache(cfg.latent_cache) if cfg.latent_cache else None
 
     # -- the evaluation pool -----------------------------------------------------------------
     def use_services(self, services: Mapping[str, list]) -> None:
@@ -105,15 +107,14 @@ class WorldModelsLearner(Learner):
 
     # -- stage 2: M --------------------------------------------------------------------------
     def rnn_step(self, batch: Batch) -> dict[str, float]:
-        obs = torch.as_tensor(np.array(batch["obs"]), device=self.device)  # [B, T, 64, 64, C] (copy: replay arrays may be read-only)
-        b, t_len = obs.shape[:2]
+        obs = np.asarray(batch["obs"])  # [B, T, 64, 64, C]
         mask = torch.as_tensor(np.array(batch["mask"]), device=self.device).float()  # [B, T]
         first = torch.as_tensor(np.array(batch["first"]), device=self.device).bool()
         terminal = torch.as_tensor(np.array(batch["terminal"]), device=self.device).float()
+        mu, logvar = self._encode_windows(obs)  # [B, T, Z] each
         with torch.no_grad():
-            mu, logvar = self.vae.encode(obs.flatten(0, 1))
-            z = ConvVAE.sample(mu, logvar, self.generator).reshape(b, t_len, -1)  # [B, T, Z]
-        self._remember_starts(mu.reshape(b, t_len, -1), logvar.reshape(b, t_len, -1), first)
+            z = ConvVAE.sample(mu, logvar, self.generator)  # [B, T, Z]: a fresh draw per update, as the authors' M
+        self._remember_starts(mu, logvar, first)
         action = action_to_model(torch.as_tensor(np.array(batch["action"]), device=self.device), self.spec)  # [B, T, A]
         log_pi, m, log_s, done_logit, _ = self.rnn(z[:, :-1], action[:, :-1])  # predicts step t+1 from t
         # a pair (t, t+1) counts when both are real steps of one episode (windows hold one episode)
@@ -126,8 +127,26 @@ class WorldModelsLearner(Learner):
         if not torch.isfinite(loss.detach()):
             raise NonFiniteLoss(f"MDN-RNN loss is {float(loss.detach())}")
         grad = self.rnn_opt(loss)
-        return {"loss": float(loss.detach()), "rnn_nll": float(nll.detach()), "rnn_done_loss": float(done_loss.detach()),
-                "rnn_grad_norm": grad}
+        out = {"loss": float(loss.detach()), "rnn_nll": float(nll.detach()), "rnn_done_loss": float(done_loss.detach()),
+               "rnn_grad_norm": grad}
+        # whether the done head tells deaths apart: its mean probability at real deaths and elsewhere
+        p_done, dead = torch.sigmoid(done_logit.detach()), terminal[:, 1:] * valid
+        if dead.sum() > 0:
+            out["rnn_done_p_death"] = float((p_done * dead).sum() / dead.sum())
+        out["rnn_done_p_alive"] = float((p_done * (valid - dead)).sum() / (valid - dead).sum().clamp(min=1.0))
+        if self.latents is not None:
+            out["rnn_cache_hit_rate"] = self.latents.hits / max(self.latents.hits + self.latents.misses, 1)
+        return out
+
+    def _encode_windows(self, obs: np.ndarray) -> tuple[torch.Tensor, torch.Tensor]:
+        """V's mu, logvar [B, T, Z] of uint8 windows [B, T, 64, 64, C]; V is frozen from stage 2 on, so
+        windows replayed again come from the cache (latent_cache.py)."""
+        if self.latents is not None:
+            return self.latents.encode(obs, self.vae.encode, self.device)
+        with torch.no_grad():
+            frames = torch.as_tensor(np.array(obs), device=self.device)  # copy: replay arrays may be read-only
+            mu, logvar = self.vae.encode(frames.flatten(0, 1))
+        return mu.unflatten(0, frames.shape[:2]), logvar.unflatten(0, frames.shape[:2])
 
     def _remember_starts(self, mu: torch.Tensor, logvar: torch.Tensor, first: torch.Tensor) -> None:
         """Keep the encodings of episodes' first frames (dreams start from them); the first
