@@ -49,6 +49,9 @@ class WorldModelsConfig:
     # --- collecting ------------------------------------------------------------------------
     collect_noise: float = param(0.0, "collectors once C exists: Gaussian std on continuous actions, "
                                       "or the chance of a random discrete action", ge=0)
+    random_keep: float = param(0.0, "random play (before C exists): probability that an env repeats its last random "
+                                    "action, so runs last 1/(1 - p) steps and the random walk reaches states a fresh "
+                                    "action per step rarely does (0 = the paper's random policy)", ge=0, lt=1)
     z_bank: int = param(1000, "initial latents (first frames' encodings) kept to start dreams from", ge=1)
 
     def validate(self) -> None:

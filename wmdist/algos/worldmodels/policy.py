@@ -21,6 +21,7 @@ class WorldModelsPolicy(Policy):
         self.rnn = build_rnn(cfg, spec).to(self.device).eval()
         self.controller: torch.Tensor | None = None  # [P], None while acting at random
         self.state: tuple[torch.Tensor, torch.Tensor] | None = None  # M's (h, c) [1, E, H]
+        self.last_random: np.ndarray | None = None  # [E] or [E, A]: each env's last random action
 
     def set_weights(self, weights: Weights, version: int) -> None:
         load_numpy(self.vae, weights, "vae")
@@ -28,17 +29,25 @@ class WorldModelsPolicy(Policy):
         if float(weights["has_controller"]) > 0:
             self.controller = torch.as_tensor(np.asarray(weights["controller"], np.float32), device=self.device)
 
-    def _random(self, e: int) -> np.ndarray:
+    def _random(self, e: int, first: np.ndarray) -> np.ndarray:
+        """Random play: [E] indices or [E, A] env actions; with `random_keep` each env repeats its last
+        random action with that probability (never across an episode's start)."""
         s = self.spec
         if s.discrete:
-            return self.rng.integers(0, s.num_actions, size=e)
-        return self.rng.uniform(s.action_low, s.action_high, size=(e, *s.action_shape)).astype(np.float32)
+            fresh = self.rng.integers(0, s.num_actions, size=e)
+        else:
+            fresh = self.rng.uniform(s.action_low, s.action_high, size=(e, *s.action_shape)).astype(np.float32)
+        if self.cfg.random_keep > 0 and self.last_random is not None and len(self.last_random) == e:
+            keep = (self.rng.random(e) < self.cfg.random_keep) & ~np.asarray(first, bool)  # [E]
+            fresh = np.where(keep.reshape(-1, *([1] * (fresh.ndim - 1))), self.last_random, fresh)
+        self.last_random = fresh
+        return fresh
 
     @torch.no_grad()
     def act(self, obs, first, legal, to_play, explore):
         e = obs.shape[0]
         if self.controller is None:
-            return self._random(e), {}
+            return self._random(e, first), {}
         if self.state is None or self.state[0].shape[1] != e:
             self.state = self.rnn.initial(e, self.device)
         keep = torch.as_tensor(~np.asarray(first, bool), device=self.device).float()[None, :, None]  # [1, E, 1]
@@ -48,7 +57,7 @@ class WorldModelsPolicy(Policy):
         if explore and self.cfg.collect_noise > 0:
             if self.spec.discrete:
                 flip = torch.as_tensor(self.rng.random(e) < self.cfg.collect_noise, device=self.device)
-                a = torch.where(flip, torch.as_tensor(self._random(e), device=self.device), a)
+                a = torch.where(flip, torch.as_tensor(self._random(e, first), device=self.device), a)
             else:
                 a = (a + self.cfg.collect_noise * torch.as_tensor(self.rng.standard_normal(a.shape), device=self.device,
                                                                   dtype=a.dtype)).clamp(-1, 1)
