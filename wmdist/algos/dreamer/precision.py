@@ -1,8 +1,9 @@
 """Per-phase precision of a learner's update: fp32, bf16, or `auto` (measured at start-up).
 
-The phases are the keys of the modes a learner passes in. Dreamer's update has two phases that pay differently for bf16: the world model (one observe loop
-over [B, T], matmul-heavy) and imagination with the actor-critic (H steps over N starts,
-with a backward through the dynamics for continuous actions). `auto` runs the first updates
+The phases are the keys of the modes a learner passes in. Dreamer's update has two phases
+that pay differently for bf16: the world model (one observe loop over [B, T], matmul-heavy)
+and imagination with the actor-critic (H steps over N starts, with a backward through the
+dynamics for continuous actions). `auto` runs the first updates
 alternately in fp32 and bf16, times each phase (forward + its backward and optimiser step),
 drops the first update in each precision as warm-up, and keeps, per phase, the precision
 whose mean time was lower. It never chooses bf16 where the device has no native bf16
@@ -110,7 +111,8 @@ class PhasePrecision:
         return metrics
 
     def describe(self) -> str:
-        return " ".join(f"{p}={self.choice.get(p, 'measuring')}" for p in self.phases) + (f" ({self.reason})" if self.reason else "")
+        chosen = " ".join(f"{p}={self.choice.get(p, 'measuring')}" for p in self.phases)
+        return chosen + (f" ({self.reason})" if self.reason else "")
 
     def state_dict(self) -> dict[str, Any]:
         return {"choice": dict(self.choice)}

@@ -28,6 +28,15 @@ def window_key(frames: np.ndarray) -> bytes:
     return h.digest()
 
 
+@torch.no_grad()
+def encode_windows(obs: np.ndarray,  # uint8 [M, T, 64, 64, C]
+                   encoder: Encoder, device: torch.device) -> tuple[torch.Tensor, torch.Tensor]:
+    """mu, logvar [M, T, Z] of every frame, in one encoder call (a copy: replay arrays may be read-only)."""
+    frames = torch.as_tensor(np.array(obs), device=device)
+    mu, logvar = encoder(frames.flatten(0, 1))
+    return mu.unflatten(0, frames.shape[:2]), logvar.unflatten(0, frames.shape[:2])
+
+
 class LatentCache:
     """LRU map: window digest -> (mu, logvar) [T, Z] each, on the encoder's device."""
 
@@ -51,9 +60,7 @@ class LatentCache:
         keys = [window_key(w) for w in obs]
         missing = [i for i, k in enumerate(keys) if k not in self._store]
         if missing:
-            frames = torch.as_tensor(np.ascontiguousarray(obs[missing]), device=device)  # [M, T, 64, 64, C]
-            mu, logvar = encoder(frames.flatten(0, 1))
-            mu, logvar = mu.unflatten(0, frames.shape[:2]), logvar.unflatten(0, frames.shape[:2])  # [M, T, Z]
+            mu, logvar = encode_windows(obs[missing], encoder, device)  # [M, T, Z] each
             for j, i in enumerate(missing):
                 self._store[keys[i]] = (mu[j], logvar[j])
         self.hits += len(keys) - len(missing)

@@ -20,7 +20,7 @@ from wmdist.algos.base import Batch, Learner, NonFiniteLoss, UpdateResult, Weigh
 from wmdist.algos.worldmodels.cmaes import CMAES
 from wmdist.algos.worldmodels.config import WorldModelsConfig
 from wmdist.algos.worldmodels.controller import num_params
-from wmdist.algos.worldmodels.latent_cache import LatentCache
+from wmdist.algos.worldmodels.latent_cache import LatentCache, encode_windows
 from wmdist.algos.worldmodels.mdn import mdn_log_prob
 from wmdist.algos.worldmodels.models import build_rnn, build_vae, to_numpy
 from wmdist.algos.worldmodels.pool import EvalPool
@@ -143,10 +143,7 @@ class WorldModelsLearner(Learner):
         windows replayed again come from the cache (latent_cache.py)."""
         if self.latents is not None:
             return self.latents.encode(obs, self.vae.encode, self.device)
-        with torch.no_grad():
-            frames = torch.as_tensor(np.array(obs), device=self.device)  # copy: replay arrays may be read-only
-            mu, logvar = self.vae.encode(frames.flatten(0, 1))
-        return mu.unflatten(0, frames.shape[:2]), logvar.unflatten(0, frames.shape[:2])
+        return encode_windows(obs, self.vae.encode, self.device)
 
     def _remember_starts(self, mu: torch.Tensor, logvar: torch.Tensor, first: torch.Tensor) -> None:
         """Keep the encodings of episodes' first frames (dreams start from them); the first
