@@ -93,7 +93,8 @@ def test_local_run_reaches_the_search_and_resume_continues_it(tmp_path):
     quiet = ["metrics.enabled=false", "metrics.tensorboard=false", "eval.every_seconds=0", "checkpoint.every_seconds=0",
              "run.max_minutes=3", "replay.min_size=60", "learner.batch_size=2", "replay.seq_len=8", "replay.overlap=2",
              "actors.envs_per_actor=2", "algo.vae_updates=2", "algo.rnn_updates=2", "algo.popsize=4", "algo.rollouts=2",
-             "algo.vae_frames=8", "algo.dream_max_steps=30", "algo.eval_actors=2", "ray.local=true"]
+             "algo.vae_frames=8", "algo.dream_max_steps=30", "algo.eval_actors=2", "ray.local=true",
+             "algo.reeval_every=2", "algo.reeval_rollouts=2"]  # re-scored through the pool at generations 2 and 4
     cfg = load_config(CONFIGS / "worldmodels_doom_takecover.yaml", [f"run.dir={tmp_path}", *quiet, "run.max_updates=7"])
     assert train(cfg=cfg, out=io.StringIO()) == 0
     run = next(p for p in tmp_path.iterdir() if p.is_dir())
@@ -102,8 +103,10 @@ def test_local_run_reaches_the_search_and_resume_continues_it(tmp_path):
     assert train(resume=str(run), overrides=["run.max_updates=9"], out=io.StringIO()) == 0
     state = ck.load_learner_state(ck.latest_checkpoint(run))["learner"]
     assert int(np.asarray(state["cma"]["generation"]).reshape(-1)[0]) == 5
+    assert np.isfinite(float(np.asarray(state["pick"]["f"]).reshape(-1)[0]))  # the published pick was resumed
     records = [json.loads(line) for line in (run / "metrics.jsonl").read_text().splitlines()]
     assert any("loss/cma_best_fitness" in r for r in records)
+    assert sum("loss/pick_fitness" in r for r in records) >= 1
 
 
 def test_dream_video_writes_real_beside_predicted(tmp_path):

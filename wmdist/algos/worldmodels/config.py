@@ -40,6 +40,10 @@ class WorldModelsConfig:
     generations: int = param(0, "stage 3: CMA-ES generations (0 = until the run ends)", ge=0)
     train_in: str = param("dream", "where candidates are scored: dream (M at temperature tau) or real (the env)",
                           choices=("dream", "real"))
+    reeval_every: int = param(0, "generations between re-evaluations of the search's mean and the generation's best "
+                                 "candidate on `reeval_rollouts` rollouts; the best re-evaluated one is published "
+                                 "(authors' code: the mean, every 25). 0 = publish the best-ever candidate", ge=0)
+    reeval_rollouts: int = param(64, "rollouts of each re-evaluation (authors' code: 100 or more)", ge=1)
     dream_max_steps: int = param(2100, "cap of a dream rollout in steps (paper, Doom: 2100)", ge=1)
     real_max_steps: int = param(0, "cap of a real rollout in steps (0 = the env's own)", ge=0)
     # --- the evaluation pool (role `wm_eval`) ----------------------------------------------

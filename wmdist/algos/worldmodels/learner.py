@@ -5,8 +5,9 @@ Stage 2 (`rnn_updates` calls): M on V's sampled latents of each sequence: from [
     predicts z_{t+1} (mixture NLL, mdn.py) and whether o_{t+1} is terminal (done head).
 Stage 3: one CMA-ES generation per call: the pool (role `wm_eval`, handed over by the runtime as
     a service) scores `popsize` candidates on `rollouts` rollouts each, in the dream or the env.
-The published weights carry V, M and the best controller so far (`controller`, `has_controller`),
-which the collectors then act with.
+The published weights carry V, M and the controller (`controller`, `has_controller`): the best
+candidate so far, or with `reeval_every` the best re-evaluated one (pick.py), which the
+collectors then act with.
 """
 from __future__ import annotations
 
@@ -22,6 +23,7 @@ from wmdist.algos.worldmodels.config import WorldModelsConfig
 from wmdist.algos.worldmodels.controller import num_params
 from wmdist.algos.worldmodels.latent_cache import LatentCache, encode_windows
 from wmdist.algos.worldmodels.mdn import mdn_log_prob
+from wmdist.algos.worldmodels.pick import ControllerPick
 from wmdist.algos.worldmodels.models import build_rnn, build_vae, to_numpy
 from wmdist.algos.worldmodels.pool import EvalPool
 from wmdist.algos.worldmodels.vae import ConvVAE, vae_loss, vae_terms
@@ -44,6 +46,7 @@ class WorldModelsLearner(Learner):
         self.generator = torch.Generator(self.device).manual_seed(seed)
         self.n_params = num_params(spec, cfg.z_dim, cfg.rnn_hidden)
         self.cma = CMAES(self.n_params, cfg.popsize, cfg.sigma0, seed)
+        self.pick = ControllerPick(self.n_params)
         self.bank_mu = np.zeros((0, cfg.z_dim), np.float32)  # [K, Z] first frames' encodings (dream starts)
         self.bank_logvar = np.zeros((0, cfg.z_dim), np.float32)
         self.updates = 0
@@ -170,11 +173,22 @@ class WorldModelsLearner(Learner):
         rng = np.random.default_rng([self.seed, self.cma.generation])
         seeds = rng.integers(0, 2**31 - 1, size=self.cfg.rollouts)  # [R] common to every candidate
         pool = self._pool()
-        fitness = self.cma.step(lambda x: pool.evaluate(x, seeds, self.model_id, self.model_payload, self.cfg.train_in))
-        return {"cma_generation": float(self.cma.generation), "cma_best_fitness": self.cma.best_f,
-                "cma_gen_best": float(fitness.max()), "cma_gen_mean": float(fitness.mean()),
-                "cma_sigma": self.cma.sigma, "pool_retries": float(pool.retries),
-                "generation_seconds": time.monotonic() - t0}
+        candidates = self.cma.ask()  # [N, P]
+        fitness = pool.evaluate(candidates, seeds, self.model_id, self.model_payload, self.cfg.train_in)
+        self.cma.tell(candidates, fitness)
+        out = {"cma_generation": float(self.cma.generation), "cma_best_fitness": self.cma.best_f,
+               "cma_gen_best": float(fitness.max()), "cma_gen_mean": float(fitness.mean()),
+               "cma_sigma": self.cma.sigma, "pool_retries": float(pool.retries)}
+        c = self.cfg
+        g = self.cma.generation
+        if c.reeval_every and (g % c.reeval_every == 0 or g == c.generations):
+            reseeds = np.random.default_rng([self.seed, g, 1]).integers(0, 2**31 - 1, size=c.reeval_rollouts)  # [R']
+            f = self.pick.offer(lambda x: pool.evaluate(x, reseeds, self.model_id, self.model_payload, c.train_in),
+                                {"mean": self.cma.mean, "best": candidates[int(np.argmax(fitness))]})
+            out.update({"reeval_mean": float(f[0]), "reeval_gen_best": float(f[1]), "pick_fitness": self.pick.f,
+                        "pick_is_mean": float(self.pick.source == "mean")})
+        out["generation_seconds"] = time.monotonic() - t0
+        return out
 
     # -- Learner API -------------------------------------------------------------------------
     def update(self, batch: Batch) -> UpdateResult:
@@ -193,13 +207,14 @@ class WorldModelsLearner(Learner):
 
     def get_weights(self) -> Weights:
         has = self.cma.generation > 0
+        x = self.pick.x if (self.cfg.reeval_every and self.pick.has) else self.cma.best_x  # [P]
         return {**to_numpy(self.vae, "vae"), **to_numpy(self.rnn, "rnn"),
-                "controller": self.cma.best_x.astype(np.float32), "has_controller": np.array(float(has), np.float32)}
+                "controller": x.astype(np.float32), "has_controller": np.array(float(has), np.float32)}
 
     def state_dict(self) -> dict[str, Any]:
         return {"vae": self.vae.state_dict(), "rnn": self.rnn.state_dict(), "vae_opt": self.vae_opt.state_dict(),
                 "rnn_opt": self.rnn_opt.state_dict(), "generator": self.generator.get_state(), "updates": self.updates,
-                "cma": self.cma.state(), "bank_mu": self.bank_mu, "bank_logvar": self.bank_logvar}
+                "cma": self.cma.state(), "pick": self.pick.state(), "bank_mu": self.bank_mu, "bank_logvar": self.bank_logvar}
 
     def load_state_dict(self, state: Mapping[str, Any]) -> None:
         self.vae.load_state_dict(state["vae"])
@@ -209,5 +224,7 @@ class WorldModelsLearner(Learner):
         self.generator.set_state(torch.as_tensor(state["generator"]))
         self.updates = int(state["updates"])
         self.cma.load({k: np.asarray(v) for k, v in state["cma"].items()})
+        if "pick" in state:  # checkpoints before session 29 have none
+            self.pick.load(state["pick"])
         self.bank_mu = np.asarray(state["bank_mu"], np.float32)
         self.bank_logvar = np.asarray(state["bank_logvar"], np.float32)
