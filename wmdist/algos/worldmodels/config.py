@@ -40,6 +40,10 @@ class WorldModelsConfig:
     generations: int = param(0, "stage 3: CMA-ES generations (0 = until the run ends)", ge=0)
     train_in: str = param("dream", "where candidates are scored: dream (M at temperature tau) or real (the env)",
                           choices=("dream", "real"))
+    iterations: int = param(1, "rounds of controller search; between two rounds M is refitted for `refit_updates` "
+                               "on replay, which by then holds the controller's own episodes (paper sec. 5, iterative "
+                               "training: M learns what the controller's habits lead to)", ge=1)
+    refit_updates: int = param(0, "M updates between two rounds of the search (with iterations > 1)", ge=0)
     reeval_every: int = param(0, "generations between re-evaluations of the search's mean and the generation's best "
                                  "candidate on `reeval_rollouts` rollouts; the best re-evaluated one is published "
                                  "(authors' code: the mean, every 25). 0 = publish the best-ever candidate", ge=0)
@@ -67,5 +71,8 @@ class WorldModelsConfig:
         if self.train_in == "dream" and self.rnn_updates == 0:
             raise ValueError("algo.train_in is dream but algo.rnn_updates is 0: a controller trained in the dream "
                              "needs a trained M")
+        if self.iterations > 1 and (self.generations == 0 or self.refit_updates == 0):
+            raise ValueError(f"algo.iterations is {self.iterations}: each round needs a fixed length "
+                             f"(algo.generations > 0) and M a refit between rounds (algo.refit_updates > 0)")
         if self.train_in == "real" and self.eval_actors == 0:
             raise ValueError("algo.train_in is real: the real rollouts need evaluation actors (algo.eval_actors >= 1)")

@@ -5,6 +5,9 @@ Stage 2 (`rnn_updates` calls): M on V's sampled latents of each sequence: from [
     predicts z_{t+1} (mixture NLL, mdn.py) and whether o_{t+1} is terminal (done head).
 Stage 3: one CMA-ES generation per call: the pool (role `wm_eval`, handed over by the runtime as
     a service) scores `popsize` candidates on `rollouts` rollouts each, in the dream or the env.
+With `iterations` > 1, stage 3 runs in rounds of `generations`, and between two rounds M is
+refitted (stage 2 again, `refit_updates` calls) on replay that by then holds the controller's own
+episodes; the search goes on from its mean, and its best scores start afresh (they were M's).
 The published weights carry V, M and the controller (`controller`, `has_controller`): the best
 candidate so far, or with `reeval_every` the best re-evaluated one (pick.py), which the
 collectors then act with.
@@ -73,6 +76,15 @@ class WorldModelsLearner(Learner):
         lengths vary, so smaller shares balance the actors)."""
         return 1 if self.cfg.train_in == "dream" else 2
 
+    def _round(self) -> tuple[int, int]:
+        """(round, calls into it) of the search stage; a round is `generations` calls of CMA-ES
+        followed, except in the last round, by `refit_updates` calls of M."""
+        c = self.cfg
+        r = self.updates - c.vae_updates - c.rnn_updates
+        if c.generations == 0:
+            return 0, r
+        return r // (c.generations + c.refit_updates), r % (c.generations + c.refit_updates)
+
     @property
     def stage(self) -> int:
         c = self.cfg
@@ -80,12 +92,21 @@ class WorldModelsLearner(Learner):
             return STAGE_VAE
         if self.updates < c.vae_updates + c.rnn_updates:
             return STAGE_RNN
-        return STAGE_CMA if (c.generations == 0 or self.cma.generation < c.generations) else STAGE_DONE
+        i, j = self._round()
+        if c.generations == 0 or (i < c.iterations and j < c.generations):
+            return STAGE_CMA
+        return STAGE_RNN if i < c.iterations - 1 else STAGE_DONE
 
     @property
     def model_id(self) -> int:
-        """V and M are fixed from stage 3 on: the pool's actors cache them under this id."""
-        return self.cfg.vae_updates + self.cfg.rnn_updates + 1
+        """V and M are fixed within a round of the search: the pool's actors cache them under this id."""
+        return self.cfg.vae_updates + self.cfg.rnn_updates + 1 + self._round()[0]
+
+    def _start_refit(self) -> None:
+        """M is about to change: the search's scores so far were M's, so the best ones start afresh
+        (the published controller stays until the new M scores another)."""
+        self.cma.best_f = -np.inf
+        self.pick.f = -np.inf
 
     # -- stage 1: V --------------------------------------------------------------------------
     def _frames(self, batch: Batch) -> torch.Tensor:
@@ -180,8 +201,8 @@ class WorldModelsLearner(Learner):
                "cma_gen_best": float(fitness.max()), "cma_gen_mean": float(fitness.mean()),
                "cma_sigma": self.cma.sigma, "pool_retries": float(pool.retries)}
         c = self.cfg
-        g = self.cma.generation
-        if c.reeval_every and (g % c.reeval_every == 0 or g == c.generations):
+        g, k = self.cma.generation, self._round()[1] + 1  # k: this generation's place in its round
+        if c.reeval_every and (k % c.reeval_every == 0 or k == c.generations):
             reseeds = np.random.default_rng([self.seed, g, 1]).integers(0, 2**31 - 1, size=c.reeval_rollouts)  # [R']
             f = self.pick.offer(lambda x: pool.evaluate(x, reseeds, self.model_id, self.model_payload, c.train_in),
                                 {"mean": self.cma.mean, "best": candidates[int(np.argmax(fitness))]})
@@ -196,6 +217,8 @@ class WorldModelsLearner(Learner):
         if stage == STAGE_VAE:
             metrics = self.vae_step(batch)
         elif stage == STAGE_RNN:
+            if self.updates >= self.cfg.vae_updates + self.cfg.rnn_updates and self._round()[1] == self.cfg.generations:
+                self._start_refit()
             metrics = self.rnn_step(batch)
         elif stage == STAGE_CMA:
             metrics = self.generation()
@@ -203,6 +226,8 @@ class WorldModelsLearner(Learner):
             metrics = {"cma_best_fitness": self.cma.best_f}
         self.updates += 1
         metrics["stage"] = float(stage)
+        if self.cfg.iterations > 1:
+            metrics["search_round"] = float(self._round()[0])
         return UpdateResult(metrics=metrics)
 
     def get_weights(self) -> Weights:

@@ -12,16 +12,18 @@ from typing import Any, Callable, Mapping
 
 import numpy as np
 
+SOURCES = ("", "mean", "best")  # as saved: none yet, the search's mean, a generation's best
+
 
 class ControllerPick:
     def __init__(self, dim: int) -> None:
         self.x = np.zeros(dim, np.float64)  # [P] the published controller
-        self.f = -np.inf  # its re-evaluated fitness (mean over the re-evaluation's rollouts)
+        self.f = -np.inf  # its re-evaluated fitness (mean over the re-evaluation's rollouts; reset when M changes)
         self.source = ""  # "mean" or "best": which candidate it was when picked
 
     @property
     def has(self) -> bool:
-        return bool(np.isfinite(self.f))
+        return self.source != ""
 
     def offer(self, evaluate: Callable[[np.ndarray], np.ndarray], candidates: Mapping[str, np.ndarray]) -> np.ndarray:
         """Re-score `candidates` (name -> [P]) with `evaluate` ([N, P] -> fitness [N], on the
@@ -36,10 +38,10 @@ class ControllerPick:
         return f
 
     def state(self) -> dict[str, np.ndarray]:
-        return {"x": self.x, "f": np.array(self.f), "from_mean": np.array(float(self.source == "mean"))}
+        return {"x": self.x, "f": np.array(self.f), "source": np.array(float(SOURCES.index(self.source)))}
 
     def load(self, state: Mapping[str, Any]) -> None:
         s = {k: np.asarray(v) for k, v in state.items()}
         self.x = s["x"].astype(np.float64).reshape(-1)
         self.f = float(s["f"].reshape(-1)[0])
-        self.source = ("mean" if float(s["from_mean"].reshape(-1)[0]) else "best") if self.has else ""
+        self.source = SOURCES[int(s["source"].reshape(-1)[0])]
