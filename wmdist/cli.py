@@ -86,6 +86,11 @@ def _parser() -> argparse.ArgumentParser:
     d.add_argument("run_dir")
     d.add_argument("--out", default=None, help="output GIF (default RUN_DIR/dream.gif)")
     d.add_argument("--horizon", type=_positive_int, default=45)
+    d.add_argument("--check", action="store_true",
+                   help="World Models: score the controller and fixed policies in the dream and in the real env, "
+                        "side by side (where M is wrong, CMA-ES will exploit it)")
+    d.add_argument("--rollouts", type=_positive_int, default=64, help="--check: dream rollouts per policy")
+    d.add_argument("--episodes", type=_positive_int, default=5, help="--check: real episodes per policy")
 
     b = sub.add_parser("bench", help="run a benchmark (mcts, replay, selfplay, dreamer, envs, planner, all; soak by name)",
                        description="Each measured case prints one JSON object per line with --json.")
@@ -168,6 +173,10 @@ def cmd_eval(a: argparse.Namespace) -> int:
 def cmd_dream(a: argparse.Namespace) -> int:
     from wmdist.runtime.evaluate import dream_run
 
+    if a.check:
+        from wmdist.runtime.evaluate import dream_check_run
+
+        return dream_check_run(a.run_dir, rollouts=a.rollouts, episodes=a.episodes)
     return dream_run(a.run_dir, out=a.out, horizon=a.horizon)
 
 

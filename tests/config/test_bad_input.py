@@ -259,7 +259,8 @@ def test_train_with_a_broken_env_prints_one_line(broken_gym_id, tmp_path, capsys
 
 
 @pytest.mark.parametrize("argv", [["eval", "RUN", "--episodes", "0"], ["eval", "RUN", "--episodes", "-2"],
-                                  ["dream", "RUN", "--horizon", "0"]])
+                                  ["dream", "RUN", "--horizon", "0"], ["dream", "RUN", "--check", "--rollouts", "0"],
+                                  ["dream", "RUN", "--check", "--episodes", "0"]])
 def test_counts_below_one_are_refused_before_anything_loads(argv, capsys):
     # RUN does not exist: the count must be refused by the parser, before the run is looked at
     with pytest.raises(SystemExit) as ex:

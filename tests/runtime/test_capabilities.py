@@ -146,6 +146,10 @@ def test_dream_on_a_muzero_run_is_one_line_exit_2(tmp_path, capsys):
     assert "predicts observations" in lines[0] and "'muzero'" in lines[0]
     assert "Traceback" not in captured.out + captured.err
     assert not (run_dir / "dream.gif").exists()
+    assert main(["dream", str(run_dir), "--check"]) == 2  # World Models' dream check, likewise
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1 and "World Models" in lines[0] and "'muzero'" in lines[0]
+    assert not (run_dir / "dream_check.json").exists()
 
 
 def test_dream_on_a_dreamer_run_writes_the_video(tmp_path, capsys):

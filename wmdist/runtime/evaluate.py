@@ -3,6 +3,7 @@ play greedy episodes (board games: against the exact solver or a human), or writ
 world model's open-loop prediction video."""
 from __future__ import annotations
 
+import json
 import sys
 import time
 from pathlib import Path
@@ -171,4 +172,31 @@ def dream_run(run_dir: str, out: str | None = None, horizon: int = 45, stream: I
         raise ConfigError(f"dream cannot write the video: {err}") from None
     _to_tensorboard(run_dir, cfg, "dream", video)
     print(f"wmdist: dream video {video}", file=stream)
+    return 0
+
+
+def dream_check_run(run_dir: str, rollouts: int = 64, episodes: int = 5, stream: IO[str] | None = None) -> int:
+    """`wmdist dream RUN --check`: World Models' dream against the real env, per policy
+    (wmdist/algos/worldmodels/dream_check.py); the rows also go to RUN_DIR/dream_check.json."""
+    stream = stream or sys.stdout
+    cfg, spec, algo, version, weights, ckpt = load_run(run_dir)
+    if cfg.algo_name != "worldmodels":
+        raise ConfigError(f"dream --check scores a World Models controller in M's dream; {run_dir} trained "
+                          f"{cfg.algo_name!r}")
+    from wmdist.algos.worldmodels.dream_check import dream_check, format_check
+
+    try:
+        state = ck.load_learner_state(ckpt)["learner"]
+    except Exception as err:  # noqa: BLE001 - a damaged file: one line
+        raise ConfigError(ck.unreadable_message(ckpt, err)) from None
+    try:
+        rows = dream_check(cfg, spec, weights, state, rollouts=rollouts, episodes=episodes, seed=cfg.run.seed)
+    except ValueError as err:
+        raise ConfigError(f"dream --check: {err}") from None
+    for line in format_check(rows, cfg.algo.temperature, rollouts, episodes):
+        print(line, file=stream)
+    out = Path(run_dir) / "dream_check.json"
+    out.write_text(json.dumps({"checkpoint": ckpt.name, "version": version, "temperature": cfg.algo.temperature,
+                               "rollouts": rollouts, "episodes": episodes, "rows": rows}, indent=1) + "\n")
+    print(f"wmdist: dream check {out}", file=stream)
     return 0

@@ -107,6 +107,15 @@ def test_local_run_reaches_the_search_and_resume_continues_it(tmp_path):
     records = [json.loads(line) for line in (run / "metrics.jsonl").read_text().splitlines()]
     assert any("loss/cma_best_fitness" in r for r in records)
     assert sum("loss/pick_fitness" in r for r in records) >= 1
+    # `wmdist dream RUN --check`: the controller and each fixed action, in the dream and the real game
+    from wmdist.runtime.evaluate import dream_check_run
+
+    out = io.StringIO()
+    assert dream_check_run(str(run), rollouts=2, episodes=1, stream=out) == 0
+    rows = json.loads((run / "dream_check.json").read_text())["rows"]
+    assert [r["policy"] for r in rows] == ["controller", "always action 0", "always action 1", "always action 2"]
+    assert all(1 <= r["dream"] <= 30 and r["real"] >= 1 for r in rows)  # dreams capped at 30 steps here
+    assert "always action 2" in out.getvalue()
 
 
 def test_dream_video_writes_real_beside_predicted(tmp_path):

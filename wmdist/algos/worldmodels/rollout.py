@@ -65,7 +65,7 @@ def real_return(
     state = rnn.initial(1)
     total, steps = 0.0, 0
     while True:
-        mu, _ = vae.encode(torch.as_tensor(obs)[None])  # [1, Z]
+        mu, _ = vae.encode(torch.as_tensor(np.array(obs))[None])  # [1, Z] (a copy: env frames may be read-only)
         a = act_batched(params[None], mu[None], state[0][0][None], spec)[0]  # [1] or [1, A]
         env_a = action_to_env(a, spec)[0]
         obs, reward, term, trunc = env.step(env_a)
