@@ -133,3 +133,18 @@ def test_dream_video_writes_real_beside_predicted(tmp_path):
     obs = np.zeros((7, 64, 64, 3), np.uint8)
     preds = predict_frames(algo, learner.get_weights(), obs, np.zeros(7, np.int64), context=3)
     assert preds.shape == (7, 64, 64, 3) and preds.dtype == np.uint8
+
+
+def test_carracing_preset_searches_in_the_real_env(tmp_path):
+    """The CarRacing preset's controller search scores candidates in real episodes (train_in: real)."""
+    quiet = ["metrics.enabled=false", "metrics.tensorboard=false", "eval.every_seconds=0", "checkpoint.every_seconds=0",
+             "run.max_minutes=3", "replay.min_size=60", "learner.batch_size=2", "replay.seq_len=8", "replay.overlap=2",
+             "actors.envs_per_actor=1", "algo.vae_updates=2", "algo.rnn_updates=2", "algo.popsize=2", "algo.rollouts=1",
+             "algo.vae_frames=8", "algo.real_max_steps=15", "algo.eval_actors=1", "ray.local=true", "run.max_updates=6"]
+    cfg = load_config(CONFIGS / "worldmodels_carracing.yaml", [f"run.dir={tmp_path}", *quiet])
+    assert train(cfg=cfg, out=io.StringIO()) == 0
+    run = next(p for p in tmp_path.iterdir() if p.is_dir())
+    state = ck.load_learner_state(ck.latest_checkpoint(run))["learner"]
+    assert int(np.asarray(state["cma"]["generation"]).reshape(-1)[0]) == 2
+    best = float(np.asarray(state["cma"]["best_f"]).reshape(-1)[0])
+    assert np.isfinite(best) and best != 0.0  # a real return over 15 steps (tiles and the -0.1 per frame)
