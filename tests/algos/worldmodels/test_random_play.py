@@ -6,6 +6,8 @@ from tests.algos.worldmodels.test_learner import SMALL, SPEC
 from wmdist.algos.worldmodels import WorldModels, WorldModelsConfig
 from wmdist.envs.spec import EnvSpec
 
+SMALL_Z = WorldModelsConfig().z_dim  # SMALL keeps the default latent size
+
 
 def _repeats(keep: float, spec: EnvSpec, steps: int = 3000, e: int = 4, first_every: int = 0) -> tuple[float, float]:
     """(share of steps that repeat the env's previous action, the same share at episode starts)."""
@@ -37,3 +39,27 @@ def test_random_keep_holds_continuous_actions_too():
                    action_low=-1.0, action_high=1.0)
     assert _repeats(0.0, spec, steps=500)[0] == 0.0
     assert abs(_repeats(0.8, spec, steps=1500)[0] - 0.8) < 0.04
+
+
+def test_collect_random_plays_whole_episodes_at_random_beside_the_controller():
+    """Once C exists, `collect_random` is the share of collectors' episodes played at random; an
+    episode keeps its choice, the evaluator (explore off) always plays C."""
+    from wmdist.algos.worldmodels.dream_check import fixed_controllers
+
+    algo = WorldModels(SPEC, WorldModelsConfig(**{**SMALL, "collect_random": 0.5}))
+    policy = algo.make_policy("cpu")
+    weights = algo.make_learner().get_weights()
+    weights["controller"] = fixed_controllers(SPEC, SMALL_Z, SMALL["rnn_hidden"])["always action 2"]
+    weights["has_controller"] = np.array(1.0, np.float32)
+    policy.set_weights(weights, 1)
+    e, length, episodes = 40, 10, 6
+    obs = np.zeros((e, *SPEC.obs_shape), np.uint8)
+    random_share = []
+    for ep in range(episodes):
+        acts = np.stack([policy.act(obs, np.full(e, t == 0), None, None, True)[0] for t in range(length)])  # [T, E]
+        off_c = (acts != 2).any(0)  # [E] an env that left C's action played this episode at random
+        random_share.append(off_c.mean())
+        assert ((acts[:, ~off_c] == 2).all())  # the others played C throughout
+    assert 0.3 < np.mean(random_share) < 0.65  # ~0.5 x (1 - (1/3)^10)
+    greedy = np.stack([policy.act(obs, np.full(e, t == 0), None, None, False)[0] for t in range(length)])
+    assert (greedy == 2).all()

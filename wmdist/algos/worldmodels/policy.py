@@ -22,6 +22,7 @@ class WorldModelsPolicy(Policy):
         self.controller: torch.Tensor | None = None  # [P], None while acting at random
         self.state: tuple[torch.Tensor, torch.Tensor] | None = None  # M's (h, c) [1, E, H]
         self.last_random: np.ndarray | None = None  # [E] or [E, A]: each env's last random action
+        self.random_episode: np.ndarray | None = None  # [E] bool: this episode is played at random (collect_random)
 
     def set_weights(self, weights: Weights, version: int) -> None:
         load_numpy(self.vae, weights, "vae")
@@ -54,14 +55,23 @@ class WorldModelsPolicy(Policy):
         self.state = (self.state[0] * keep, self.state[1] * keep)  # a new episode starts from zero state
         mu, _ = self.vae.encode(torch.as_tensor(np.array(obs), device=self.device))  # [E, Z] (a copy: obs may be read-only)
         a = act_batched(self.controller[None], mu[None], self.state[0][0][None], self.spec)[0]  # [E] or [E, A]
-        if explore and self.cfg.collect_noise > 0:
+        c = self.cfg
+        rand = self._random(e, first) if explore and (c.collect_random > 0 or c.collect_noise > 0) else None  # env actions
+        if explore and c.collect_noise > 0:
             if self.spec.discrete:
-                flip = torch.as_tensor(self.rng.random(e) < self.cfg.collect_noise, device=self.device)
-                a = torch.where(flip, torch.as_tensor(self._random(e, first), device=self.device), a)
+                flip = torch.as_tensor(self.rng.random(e) < c.collect_noise, device=self.device)
+                a = torch.where(flip, torch.as_tensor(rand, device=self.device), a)
             else:
-                a = (a + self.cfg.collect_noise * torch.as_tensor(self.rng.standard_normal(a.shape), device=self.device,
-                                                                  dtype=a.dtype)).clamp(-1, 1)
+                a = (a + c.collect_noise * torch.as_tensor(self.rng.standard_normal(a.shape), device=self.device,
+                                                           dtype=a.dtype)).clamp(-1, 1)
         env_a = action_to_env(a, self.spec)
+        if explore and c.collect_random > 0:  # whole episodes of random play keep M's first data in replay
+            fresh = np.asarray(first, bool)
+            if self.random_episode is None or len(self.random_episode) != e:
+                self.random_episode, fresh = np.zeros(e, bool), np.ones(e, bool)
+            draw = self.rng.random(e) < c.collect_random  # [E]
+            self.random_episode = np.where(fresh, draw, self.random_episode)
+            env_a = np.where(self.random_episode.reshape(-1, *([1] * (np.ndim(env_a) - 1))), rand, env_a)
         _, _, _, _, self.state = self.rnn.step(mu, action_to_model(torch.as_tensor(env_a, device=self.device), self.spec),
                                                self.state)
         return env_a, {}
