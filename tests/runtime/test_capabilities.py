@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from wmdist.algos.base import (CAPABILITIES, PACKED_WINDOWS, PLANS, PLOTS_EMBEDDINGS, PREDICTS_OBSERVATIONS,
+from wmdist.algos.base import (CAPABILITIES, CHECKS_DREAM, PACKED_WINDOWS, PLANS, PLOTS_EMBEDDINGS, PREDICTS_OBSERVATIONS,
                                REANALYZE, TWO_PLAYER, Algorithm)
 from wmdist.algos.registry import ALGORITHMS, resolve
 from wmdist.cli import main
@@ -100,7 +100,8 @@ def test_runtime_cli_and_config_never_branch_on_an_algorithm_name():
 # --- 2. declared capabilities --------------------------------------------------------------
 
 def test_capability_constants_are_the_known_set():
-    assert CAPABILITIES == {PREDICTS_OBSERVATIONS, TWO_PLAYER, REANALYZE, PLANS, PLOTS_EMBEDDINGS, PACKED_WINDOWS}
+    assert CAPABILITIES == {PREDICTS_OBSERVATIONS, TWO_PLAYER, REANALYZE, PLANS, PLOTS_EMBEDDINGS, PACKED_WINDOWS,
+                            CHECKS_DREAM}
     assert all(isinstance(c, str) for c in CAPABILITIES)
     assert Algorithm.capabilities == frozenset()
     with pytest.raises(ValueError, match="unknown capability"):
@@ -148,7 +149,7 @@ def test_dream_on_a_muzero_run_is_one_line_exit_2(tmp_path, capsys):
     assert not (run_dir / "dream.gif").exists()
     assert main(["dream", str(run_dir), "--check"]) == 2  # World Models' dream check, likewise
     lines = capsys.readouterr().err.strip().splitlines()
-    assert len(lines) == 1 and "World Models" in lines[0] and "'muzero'" in lines[0]
+    assert len(lines) == 1 and "dream" in lines[0] and "'muzero'" in lines[0]
     assert not (run_dir / "dream_check.json").exists()
 
 

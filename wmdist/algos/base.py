@@ -55,8 +55,11 @@ PLOTS_EMBEDDINGS = "plots_embeddings"
 # its learner restarts its state at `first` inside a sampled window, so one window may hold the end of
 # an episode and the start of the next (`replay.pack_episodes`)
 PACKED_WINDOWS = "packed_windows"
+# trains a policy inside its model's dream: `dream_check` scores policies in the dream and the real env
+# side by side (`wmdist dream RUN --check`)
+CHECKS_DREAM = "checks_dream"
 CAPABILITIES: frozenset[str] = frozenset({PREDICTS_OBSERVATIONS, TWO_PLAYER, REANALYZE, PLANS, PLOTS_EMBEDDINGS,
-                                          PACKED_WINDOWS})
+                                          PACKED_WINDOWS, CHECKS_DREAM})
 
 
 @dataclass(frozen=True)
@@ -212,6 +215,12 @@ class Algorithm(ABC):
         """Write a PNG of one planned episode's predicted embedding trajectory against the real
         one to `path` and return the path. Only for algorithms that offer PLOTS_EMBEDDINGS."""
         raise NotImplementedError(f"{type(self).__name__} does not plot embeddings")
+
+    def dream_check(self, run_config: Any, weights: Weights, learner_state: Mapping[str, Any], rollouts: int,
+                    episodes: int) -> list[dict[str, float | str]]:
+        """Rows {policy, dream, real}: policies scored in the model's dream and in the real env.
+        Only for algorithms that offer CHECKS_DREAM."""
+        raise NotImplementedError(f"{type(self).__name__} does not train in a dream")
 
     def step_fields(self) -> dict[str, FieldSpec]:
         """Every per-step field of a stored sequence."""

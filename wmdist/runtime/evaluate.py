@@ -11,7 +11,7 @@ from typing import IO, Callable
 
 import numpy as np
 
-from wmdist.algos.base import PLOTS_EMBEDDINGS, PREDICTS_OBSERVATIONS
+from wmdist.algos.base import CHECKS_DREAM, PLOTS_EMBEDDINGS, PREDICTS_OBSERVATIONS
 from wmdist.config.errors import ConfigError
 from wmdist.runtime import checkpoint as ck
 from wmdist.runtime.board_eval import default_opponent, greedy_action, judge_lines, play_games
@@ -180,23 +180,33 @@ def dream_check_run(run_dir: str, rollouts: int = 64, episodes: int = 5, stream:
     (wmdist/algos/worldmodels/dream_check.py); the rows also go to RUN_DIR/dream_check.json."""
     stream = stream or sys.stdout
     cfg, spec, algo, version, weights, ckpt = load_run(run_dir)
-    if cfg.algo_name != "worldmodels":
-        raise ConfigError(f"dream --check scores a World Models controller in M's dream; {run_dir} trained "
-                          f"{cfg.algo_name!r}")
-    from wmdist.algos.worldmodels.dream_check import dream_check, format_check
-
+    if not algo.offers(CHECKS_DREAM):
+        raise ConfigError(f"dream --check scores a policy trained in the model's dream (World Models); {run_dir} "
+                          f"trained {cfg.algo_name!r}")
     try:
         state = ck.load_learner_state(ckpt)["learner"]
     except Exception as err:  # noqa: BLE001 - a damaged file: one line
         raise ConfigError(ck.unreadable_message(ckpt, err)) from None
     try:
-        rows = dream_check(cfg, spec, weights, state, rollouts=rollouts, episodes=episodes, seed=cfg.run.seed)
+        rows = algo.dream_check(cfg, weights, state, rollouts, episodes)
     except ValueError as err:
         raise ConfigError(f"dream --check: {err}") from None
-    for line in format_check(rows, cfg.algo.temperature, rollouts, episodes):
+    for line in format_check(rows, getattr(cfg.algo, "temperature", None), rollouts, episodes):
         print(line, file=stream)
     out = Path(run_dir) / "dream_check.json"
     out.write_text(json.dumps({"checkpoint": ckpt.name, "version": version, "temperature": cfg.algo.temperature,
                                "rollouts": rollouts, "episodes": episodes, "rows": rows}, indent=1) + "\n")
     print(f"wmdist: dream check {out}", file=stream)
     return 0
+
+
+def format_check(rows: list[dict], tau: float | None, rollouts: int, episodes: int) -> list[str]:
+    """`wmdist dream --check`'s table: each policy's dream score beside its real one."""
+    at = f"tau {tau:g}, " if tau is not None else ""
+    lines = [f"dream check: {at}{rollouts} dream rollouts and {episodes} real episodes per policy "
+             f"(dream: steps survived; real: return)",
+             f"{'policy':<18}{'dream':>9}{'real':>9}{'dream/real':>12}"]
+    for r in rows:
+        ratio = f"{r['dream'] / r['real']:.2f}" if r["real"] else "-"
+        lines.append(f"{r['policy']:<18}{r['dream']:>9.1f}{r['real']:>9.1f}{ratio:>12}")
+    return lines

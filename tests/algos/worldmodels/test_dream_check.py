@@ -5,7 +5,8 @@ import pytest
 import torch
 
 from wmdist.algos.worldmodels.controller import act_batched
-from wmdist.algos.worldmodels.dream_check import dream_check, fixed_controllers, format_check
+from wmdist.algos.worldmodels.dream_check import dream_check, fixed_controllers
+from wmdist.runtime.evaluate import format_check
 from wmdist.envs.spec import EnvSpec
 
 DISCRETE = EnvSpec(id="d", obs_shape=(64, 64, 3), obs_dtype="uint8", obs_kind="image", num_actions=3)

@@ -2,9 +2,9 @@
 evaluation pool (role `wm_eval`) that scores the candidates in parallel."""
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Mapping
 
-from wmdist.algos.base import PREDICTS_OBSERVATIONS, Algorithm, FieldSpec, Weights
+from wmdist.algos.base import CHECKS_DREAM, PREDICTS_OBSERVATIONS, Algorithm, FieldSpec, Weights
 from wmdist.algos.worldmodels.config import WorldModelsConfig
 from wmdist.algos.worldmodels.learner import POOL_ROLE, WorldModelsLearner
 from wmdist.algos.worldmodels.policy import WorldModelsPolicy
@@ -21,7 +21,7 @@ def _worker_cls() -> type:
 class WorldModels(Algorithm):
     name = "worldmodels"
     Config = WorldModelsConfig
-    capabilities = frozenset({PREDICTS_OBSERVATIONS})  # V decodes M's imagined latents
+    capabilities = frozenset({PREDICTS_OBSERVATIONS, CHECKS_DREAM})  # V decodes M's imagined latents; C trains in M's dream
 
     def __init__(self, spec: EnvSpec, config: WorldModelsConfig | None = None, seed: int = 0) -> None:
         super().__init__(spec, config if config is not None else WorldModelsConfig(), seed)
@@ -58,3 +58,9 @@ class WorldModels(Algorithm):
         from wmdist.algos.worldmodels.dream import world_models_video
 
         return world_models_video(self, weights, env, path, context, horizon)
+
+    def dream_check(self, run_config: Any, weights: Weights, learner_state: Mapping[str, Any], rollouts: int,
+                    episodes: int) -> list[dict[str, float | str]]:
+        from wmdist.algos.worldmodels.dream_check import dream_check
+
+        return dream_check(run_config, self.spec, weights, learner_state, rollouts, episodes, seed=run_config.run.seed)

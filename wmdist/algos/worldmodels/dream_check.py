@@ -56,12 +56,3 @@ def dream_check(run_config: Any, spec: EnvSpec, weights: Mapping[str, np.ndarray
     real = worker.evaluate(MODEL_ID, x, np.arange(episodes) + 10_000 * (seed + 1), "real")["fitness"]
     return [{"policy": name, "dream": float(d), "real": float(r)} for name, d, r in zip(policies, dream, real)]
 
-
-def format_check(rows: list[dict[str, float | str]], tau: float, rollouts: int, episodes: int) -> list[str]:
-    lines = [f"dream check: tau {tau:g}, {rollouts} dream rollouts and {episodes} real episodes per policy "
-             f"(dream: steps survived; real: return)",
-             f"{'policy':<18}{'dream':>9}{'real':>9}{'dream/real':>12}"]
-    for r in rows:
-        ratio = f"{r['dream'] / r['real']:.2f}" if r["real"] else "-"
-        lines.append(f"{r['policy']:<18}{r['dream']:>9.1f}{r['real']:>9.1f}{ratio:>12}")
-    return lines
