@@ -8,6 +8,11 @@ biased to "never done", so every rollout runs the full `dream_steps` and the cos
 is fixed. One torch thread per actor (what a 2-core machine gives). Cases: actors = 0 (the learner
 dreams itself, no Ray), 1 and 2 on a local Ray instance with 2 CPUs.
 `generations_per_min`; `dream_steps_per_s` = candidates x rollouts x steps per second.
+
+Then the real game (the CarRacing preset's search, `train_in: real`): one evaluation actor, in
+this process, scores 8 candidates on CarRacing-v3 episodes, one episode at a time (`real_envs:
+1`) and 8 in lockstep (`real_envs: 8`, one batched V and M call per step), alternating, two
+rounds: `real_steps_per_s` and `over_one_at_a_time`.
 """
 from __future__ import annotations
 
@@ -25,6 +30,7 @@ from wmdist.algos.worldmodels.pool import EvalPool
 from wmdist.envs.spec import EnvSpec
 
 PRESET = Path(__file__).parents[2] / "configs" / "worldmodels_doom_takecover.yaml"
+CAR_PRESET = PRESET.with_name("worldmodels_carracing.yaml")
 SPEC = EnvSpec("bench:takecover", (64, 64, 3), "uint8", "image", num_actions=3)
 
 
@@ -86,3 +92,39 @@ def run(quick: bool = False) -> Iterator[dict]:
     finally:
         if started:
             ray.shutdown()
+    yield from real_cases(quick)
+
+
+def real_cases(quick: bool) -> Iterator[dict]:
+    """Real CarRacing rollouts scored one at a time against 8 in lockstep (random V and M)."""
+    import dataclasses
+
+    from wmdist.algos.worldmodels.models import build_vae
+    from wmdist.algos.worldmodels.worker import EvalWorker
+    from wmdist.config.loader import load_config
+    from wmdist.envs.factory import make_env
+
+    run_cfg = load_config(str(CAR_PRESET))
+    steps = 20 if quick else 150
+    spec = make_env(run_cfg.env, seed=0).spec
+    torch.manual_seed(0)
+    base = run_cfg.algo
+    model = {**to_numpy(build_vae(base, spec), "vae"), **to_numpy(build_rnn(base, spec), "rnn"),
+             "bank_mu": np.zeros((1, base.z_dim), np.float32), "bank_logvar": np.zeros((1, base.z_dim), np.float32)}
+    p = num_params(spec, base.z_dim, base.rnn_hidden, base.controller_h)
+    cands = np.random.default_rng(0).normal(0, base.sigma0, (8, p)).astype(np.float32)  # [8, P]
+    workers = {}
+    for width in (1, 8):
+        cfg = dataclasses.replace(base, real_envs=width, real_max_steps=steps)
+        workers[width] = EvalWorker(run_cfg, spec, 0, 1, algo_config=cfg)
+        workers[width].load_model(1, model)
+        workers[width].evaluate(1, cands[:1], np.array([0]), "real")  # warm-up: envs built, first render
+    rates: dict[int, list[float]] = {1: [], 8: []}
+    for rnd in range(2):
+        for width in (1, 8):
+            t0 = time.perf_counter()
+            workers[width].evaluate(1, cands, np.array([rnd + 1]), "real")
+            rates[width].append(len(cands) * steps / (time.perf_counter() - t0))
+            yield {"case": "real", "env": run_cfg.env.id, "round": rnd, "real_envs": width, "candidates": len(cands),
+                   "steps": steps, "params": p, "real_steps_per_s": round(rates[width][-1], 1),
+                   "over_one_at_a_time": round(rates[width][-1] / rates[1][-1], 3)}

@@ -19,10 +19,10 @@ from wmdist.envs.spec import EnvSpec
 MODEL_ID = 1  # the one model the local evaluation actor holds
 
 
-def fixed_controllers(spec: EnvSpec, z_dim: int, hidden: int) -> dict[str, np.ndarray]:
+def fixed_controllers(spec: EnvSpec, z_dim: int, hidden: int, reads_h: bool = True) -> dict[str, np.ndarray]:
     """Controllers [P] that ignore [z, h]: each discrete action always, or the middle of every
     continuous action's range (tanh(0))."""
-    p, a = num_params(spec, z_dim, hidden), spec.action_dim
+    p, a = num_params(spec, z_dim, hidden, reads_h), spec.action_dim
     if not spec.discrete:
         return {"zero action": np.zeros(p, np.float32)}
     out = {}
@@ -49,7 +49,7 @@ def dream_check(run_config: Any, spec: EnvSpec, weights: Mapping[str, np.ndarray
     policies = {}
     if float(np.asarray(weights.get("has_controller", 0.0))) > 0:
         policies["controller"] = np.asarray(weights["controller"], np.float32)
-    policies.update(fixed_controllers(spec, cfg.z_dim, cfg.rnn_hidden))
+    policies.update(fixed_controllers(spec, cfg.z_dim, cfg.rnn_hidden, cfg.controller_h))
     x = np.stack(list(policies.values()))  # [N, P]
     dream_seeds = np.random.default_rng([seed, 1]).integers(0, 2**31 - 1, size=rollouts)  # [R]
     dream = worker.evaluate(MODEL_ID, x, dream_seeds, "dream")["fitness"]

@@ -47,7 +47,7 @@ class WorldModelsLearner(Learner):
         self.vae_opt = GuardedStep(self.vae.parameters(), OptimConfig(kind="adam", lr=cfg.vae_lr))
         self.rnn_opt = GuardedStep(self.rnn.parameters(), OptimConfig(kind="adam", lr=cfg.rnn_lr, clip_norm=cfg.rnn_clip))
         self.generator = torch.Generator(self.device).manual_seed(seed)
-        self.n_params = num_params(spec, cfg.z_dim, cfg.rnn_hidden)
+        self.n_params = num_params(spec, cfg.z_dim, cfg.rnn_hidden, cfg.controller_h)
         self.cma = CMAES(self.n_params, cfg.popsize, cfg.sigma0, seed)
         self.pick = ControllerPick(self.n_params)
         self.bank_mu = np.zeros((0, cfg.z_dim), np.float32)  # [K, Z] first frames' encodings (dream starts)

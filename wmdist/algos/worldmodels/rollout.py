@@ -1,4 +1,5 @@
-"""Scoring controllers: whole batches of candidates in M's dream, or one by one in the real env.
+"""Scoring controllers: whole batches of candidates in M's dream, or in the real env (one episode
+at a time in `real_return`, the reference; several envs in lockstep in `real_returns`).
 
 Dream (World Models, sec. 4.4, the Doom experiment): from an initial latent z_0 (a real first
 frame's encoding), C acts on [z_t, h_t], M samples z_{t+1} from its mixture at temperature tau
@@ -74,3 +75,39 @@ def real_return(
         _, _, _, _, state = rnn.step(mu, a_in, state)
         if term or trunc or (max_steps and steps >= max_steps):
             return total, steps
+
+
+@torch.no_grad()
+def real_returns(
+    params: torch.Tensor,  # [J, P] one candidate per episode
+    envs: list[Any],  # >= J wmdist Envs, stepped in lockstep
+    vae: ConvVAE,
+    rnn: MDNRNN,
+    spec: EnvSpec,
+    seeds: np.ndarray,  # [J] each episode's env seed
+    max_steps: int | None = None,
+) -> np.ndarray:
+    """[J] returns of J real episodes at once: `real_return` for each, with one batched V and M
+    call per step instead of J (the env steps stay one by one)."""
+    j = params.shape[0]
+    obs = np.stack([envs[i].reset(int(seeds[i])) for i in range(j)])  # [J, H, W, C]
+    h, c = rnn.initial(j)  # [1, J, H] each
+    total, steps = np.zeros(j), 0
+    live = np.ones(j, bool)
+    while live.any():
+        idx = np.flatnonzero(live)
+        sel = torch.as_tensor(idx)
+        mu, _ = vae.encode(torch.as_tensor(obs[idx]))  # [L, Z]
+        a = act_batched(params[sel], mu[:, None], h[0, sel][:, None], spec)[:, 0]  # [L] or [L, A]
+        env_a = action_to_env(a, spec)
+        steps += 1
+        for k, i in enumerate(idx):
+            o, reward, term, trunc = envs[i].step(env_a[k])
+            obs[i] = o
+            total[i] += reward
+            if term or trunc or (max_steps and steps >= max_steps):
+                live[i] = False
+        a_in = action_to_model(torch.as_tensor(np.asarray(env_a)), spec)  # [L, A]
+        _, _, _, _, (h_l, c_l) = rnn.step(mu, a_in, (h[:, sel], c[:, sel]))
+        h, c = h.index_copy(1, sel, h_l), c.index_copy(1, sel, c_l)
+    return total

@@ -3,7 +3,7 @@
 It holds the model the learner froze for the controller search (M and the dream's start
 latents; V too for real rollouts), cached under the learner's `model_id`; a fresh or restarted
 process has none and answers `missing_model`, and the learner sends it. Real rollouts run in
-one env this actor builds from the run's env section.
+`real_envs` envs this actor builds from the run's env section, stepped in lockstep.
 """
 from __future__ import annotations
 
@@ -16,7 +16,7 @@ import torch
 
 from wmdist.algos.worldmodels.config import WorldModelsConfig
 from wmdist.algos.worldmodels.models import build_rnn, build_vae, load_numpy
-from wmdist.algos.worldmodels.rollout import dream_fitness, real_return
+from wmdist.algos.worldmodels.rollout import dream_fitness, real_returns
 from wmdist.envs.spec import EnvSpec
 
 
@@ -31,7 +31,7 @@ class EvalWorker:
         self.rnn = build_rnn(self.cfg, spec).eval()
         self.vae = None
         self.bank_mu = self.bank_logvar = None
-        self.env = None
+        self.envs: list[Any] = []  # real rollouts' envs, stepped in lockstep
 
     def load_model(self, model_id: int, weights: dict[str, np.ndarray]) -> bool:
         load_numpy(self.rnn, weights, "rnn")
@@ -69,13 +69,19 @@ class EvalWorker:
     def _real(self, x: torch.Tensor, seeds: np.ndarray) -> np.ndarray:
         if self.vae is None:
             raise RuntimeError("real rollouts need V: the model sent had none")
-        if self.env is None:
+        jobs = [(i, int(s)) for i in range(x.shape[0]) for s in seeds]  # (candidate, seed) episodes
+        width = max(1, min(self.cfg.real_envs, len(jobs)))
+        while len(self.envs) < width:
             from wmdist.envs.factory import make_env
 
-            self.env = make_env(self.run_config.env, seed=1000 * self.index)
+            self.envs.append(make_env(self.run_config.env, seed=1000 * self.index + len(self.envs)))
         cap = self.cfg.real_max_steps or None
-        return np.array([np.mean([real_return(p, self.env, self.vae, self.rnn, self.spec, int(s), cap)[0]
-                                  for s in seeds]) for p in x])
+        returns = np.zeros(len(jobs))
+        for lo in range(0, len(jobs), width):
+            chunk = jobs[lo: lo + width]
+            returns[lo: lo + len(chunk)] = real_returns(
+                x[[i for i, _ in chunk]], self.envs, self.vae, self.rnn, self.spec, np.array([s for _, s in chunk]), cap)
+        return returns.reshape(x.shape[0], len(seeds)).mean(1)
 
     def ping(self) -> bool:
         return True
