@@ -6,7 +6,10 @@ Sizes are the Take Cover preset's (configs/worldmodels_doom_takecover.yaml: z 32
 5 Gaussians, 3 actions, population 16, 8 rollouts); M is randomly initialised with its done head
 biased to "never done", so every rollout runs the full `dream_steps` and the cost per generation
 is fixed. One torch thread per actor (what a 2-core machine gives). Cases: actors = 0 (the learner
-dreams itself, no Ray), 1 and 2 on a local Ray instance with 2 CPUs.
+dreams itself, no Ray), 1 and 2 on a local Ray instance with 2 CPUs, and 2 on a simulated
+multi-node cluster (`ray.cluster_utils.Cluster`: a head and two worker nodes of 1 CPU on this
+machine), placed one per worker node by a custom resource (`algo.eval_actor_resources`), with the
+nodes they ran on (`nodes`).
 `generations_per_min`; `dream_steps_per_s` = candidates x rollouts x steps per second.
 
 Then the real game (the CarRacing preset's search, `train_in: real`): one evaluation actor, in
@@ -92,7 +95,31 @@ def run(quick: bool = False) -> Iterator[dict]:
     finally:
         if started:
             ray.shutdown()
+    if started:  # a cluster of its own needs this process off any other Ray instance
+        yield {"actors": 2, "cluster_nodes": 3, **common, **cluster_case(cfg, min_seconds)}
     yield from real_cases(quick)
+
+
+def cluster_case(cfg, min_seconds: float) -> dict:
+    """Two evaluation actors spread over two worker nodes of a local multi-node cluster."""
+    import ray
+    from ray.cluster_utils import Cluster
+
+    from wmdist.algos.worldmodels.worker import EvalWorker
+
+    cluster = Cluster(initialize_head=True, head_node_args={"num_cpus": 1, "include_dashboard": False})
+    workers = [cluster.add_node(num_cpus=1, resources={"eval_node": 1}) for _ in range(2)]
+    ray.init(address=cluster.address, log_to_driver=False, configure_logging=False)
+    try:
+        actor = ray.remote(EvalWorker).options(num_cpus=1, resources={"eval_node": 1}, max_restarts=-1, max_task_retries=0)
+        handles = [actor.remote(None, SPEC, i, 1, algo_config=cfg) for i in range(2)]
+        nodes = ray.get([h.node_id.remote() for h in handles])
+        worker_ids = {w.node_id for w in workers}
+        out = time_search(cfg, handles, min_seconds)
+        return {**out, "nodes": len(set(nodes)), "on_worker_nodes": set(nodes) <= worker_ids}
+    finally:
+        ray.shutdown()
+        cluster.shutdown()
 
 
 def real_cases(quick: bool) -> Iterator[dict]:

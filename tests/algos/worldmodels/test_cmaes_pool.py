@@ -120,3 +120,17 @@ def test_a_killed_dream_actor_is_restarted_and_its_share_scored_the_same(ray_ses
             time.sleep(0.5)
     for a in actors:
         ray.kill(a)
+
+
+def test_the_pool_role_asks_ray_for_the_configured_node_resources():
+    """`algo.eval_actor_resources` reaches the `wm_eval` role's actor options (placement on tagged nodes)."""
+    from pathlib import Path
+
+    from wmdist.algos.worldmodels.algo import WorldModels
+    from wmdist.config.loader import load_config
+
+    preset = Path(__file__).parents[3] / "configs" / "worldmodels_carracing.yaml"
+    cfg = load_config(str(preset), ["algo.eval_actor_resources={eval_node: 1}", "algo.eval_actor_cpus=0.5"])
+    (role,) = WorldModels.extra_roles(cfg)
+    assert role.resources_of(cfg).options() == {"num_cpus": 0.5, "num_gpus": 0.0, "resources": {"eval_node": 1}}
+    assert "resources" not in role.resources_of(load_config(str(preset))).options()  # none unless configured

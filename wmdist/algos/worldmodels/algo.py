@@ -36,7 +36,7 @@ class WorldModels(Algorithm):
         from wmdist.runtime.table import SERVICE, Role, RoleResources
 
         return [Role(POOL_ROLE, _worker_cls, lambda cfg: cfg.algo, lambda cfg: cfg.algo.eval_actors,
-                     lambda sec: RoleResources(sec.eval_actor_cpus),
+                     lambda sec: RoleResources(sec.eval_actor_cpus, custom=dict(sec.eval_actor_resources)),
                      args=lambda ctx, i, res: (ctx.cfg, ctx.spec, i, res.threads),
                      schedule=SERVICE, serves_learner=True)]
 

@@ -58,6 +58,8 @@ class WorldModelsConfig:
     # --- the evaluation pool (role `wm_eval`) ----------------------------------------------
     eval_actors: int = param(1, "evaluation actors scoring candidates in parallel (0 = the learner scores dream rollouts itself)", ge=0)
     eval_actor_cpus: float = param(0.5, "Ray CPUs per evaluation actor", gt=0)
+    eval_actor_resources: dict = param({}, "custom Ray resources per evaluation actor, e.g. {eval_node: 1} to place "
+                                           "them on the cluster's tagged worker nodes")
     pool_max_retries: int = param(8, "times a share of candidates is sent again after its actor died", ge=0)
     # --- collecting ------------------------------------------------------------------------
     collect_noise: float = param(0.0, "collectors once C exists: Gaussian std on continuous actions, "
