@@ -1,6 +1,7 @@
 """Real-env scoring: episodes in lockstep (`real_returns`, what the evaluation actors run) against
 one episode at a time (`real_return`, the plain reference), and the actor's fitness from them."""
 import numpy as np
+import pytest
 import torch
 
 from wmdist.algos.worldmodels.config import WorldModelsConfig
@@ -55,3 +56,31 @@ def test_the_actor_scores_each_candidate_on_its_seeds_in_chunks():
     np.testing.assert_allclose(got, want, rtol=1e-4, atol=1e-3)
     assert len(w.envs) == 3
     env.close()
+
+
+def test_patience_ends_an_episode_without_rewards_in_both_paths():
+    """A car that only brakes earns no tile after the first frames: with patience 25 its episode ends
+    25 steps after its last positive reward; one at full gas keeps finding tiles. The same in lockstep
+    and one at a time."""
+    envs = [make_env(EnvConfig(id="carracing:CarRacing-v3", time_limit=80), seed=i) for i in range(2)]
+    spec = envs[0].spec
+    cfg, vae, rnn = _models(spec)
+    p = num_params(spec, cfg.z_dim, cfg.rnn_hidden)
+    brake = torch.zeros(p)
+    brake[-3:] = torch.tensor([0.0, -10.0, 10.0])  # bias: no steering, no gas, full brake
+    drive = torch.randn(p, generator=torch.Generator().manual_seed(3)) * 0.01
+    drive[-3:] = torch.tensor([0.0, 10.0, -10.0])  # full gas, no brake: new tiles keep coming
+    params = torch.stack([brake, drive])
+    seeds = np.array([1, 2])
+    ret, steps = real_return(brake, envs[0], vae, rnn, spec, 1, None, patience=25)
+    assert steps < 45  # ended by patience, far short of the 80-step limit
+    _, full = real_return(brake, envs[0], vae, rnn, spec, 1, None)
+    assert full == 80
+    _, driven = real_return(drive, envs[1], vae, rnn, spec, 2, None, patience=25)
+    assert driven > steps
+    ours = real_returns(params, envs, vae, rnn, spec, seeds, None, patience=25)
+    ref = [real_return(params[i], envs[i], vae, rnn, spec, int(seeds[i]), None, patience=25)[0] for i in range(2)]
+    np.testing.assert_allclose(ours, ref, rtol=1e-4, atol=1e-3)
+    assert ours[0] == pytest.approx(ret, abs=1e-3)
+    for e in envs:
+        e.close()

@@ -55,6 +55,10 @@ class WorldModelsConfig:
     real_envs: int = param(8, "envs an evaluation actor steps in lockstep for real rollouts (one batched V and M "
                                "call per step for all of them)", ge=1)
     real_max_steps: int = param(0, "cap of a real rollout in steps (0 = the env's own)", ge=0)
+    real_patience: int = param(0, "a real rollout of the search also ends after this many steps in a row without a "
+                                  "positive reward (0 = never). A CarRacing car off the track earns nothing until it "
+                                  "finds the track again, so such frames mostly cost CPU (a departure: the paper plays "
+                                  "every episode to its end)", ge=0)
     # --- the evaluation pool (role `wm_eval`) ----------------------------------------------
     eval_actors: int = param(1, "evaluation actors scoring candidates in parallel (0 = the learner scores dream rollouts itself)", ge=0)
     eval_actor_cpus: float = param(0.5, "Ray CPUs per evaluation actor", gt=0)

@@ -60,20 +60,23 @@ def real_return(
     spec: EnvSpec,
     seed: int,
     max_steps: int | None = None,
+    patience: int = 0,
 ) -> tuple[float, int]:
-    """(episode return, steps) of one real episode: z_t = V's mean of o_t, h_t from M."""
+    """(episode return, steps) of one real episode: z_t = V's mean of o_t, h_t from M. With
+    `patience`, the episode also ends after that many steps in a row without a positive reward."""
     obs = env.reset(seed)
     state = rnn.initial(1)
-    total, steps = 0.0, 0
+    total, steps, idle = 0.0, 0, 0
     while True:
         mu, _ = vae.encode(torch.as_tensor(np.array(obs))[None])  # [1, Z] (a copy: env frames may be read-only)
         a = act_batched(params[None], mu[None], state[0][0][None], spec)[0]  # [1] or [1, A]
         env_a = action_to_env(a, spec)[0]
         obs, reward, term, trunc = env.step(env_a)
         total, steps = total + reward, steps + 1
+        idle = 0 if reward > 0 else idle + 1
         a_in = action_to_model(torch.as_tensor(np.asarray(env_a))[None], spec)  # [1, A]
         _, _, _, _, state = rnn.step(mu, a_in, state)
-        if term or trunc or (max_steps and steps >= max_steps):
+        if term or trunc or (max_steps and steps >= max_steps) or (patience and idle >= patience):
             return total, steps
 
 
@@ -86,6 +89,7 @@ def real_returns(
     spec: EnvSpec,
     seeds: np.ndarray,  # [J] each episode's env seed
     max_steps: int | None = None,
+    patience: int = 0,
 ) -> np.ndarray:
     """[J] returns of J real episodes at once: `real_return` for each, with one batched V and M
     call per step instead of J (the env steps stay one by one)."""
@@ -93,6 +97,7 @@ def real_returns(
     obs = np.stack([envs[i].reset(int(seeds[i])) for i in range(j)])  # [J, H, W, C]
     h, c = rnn.initial(j)  # [1, J, H] each
     total, steps = np.zeros(j), 0
+    idle = np.zeros(j, int)  # [J] steps in a row without a positive reward
     live = np.ones(j, bool)
     while live.any():
         idx = np.flatnonzero(live)
@@ -105,7 +110,8 @@ def real_returns(
             o, reward, term, trunc = envs[i].step(env_a[k])
             obs[i] = o
             total[i] += reward
-            if term or trunc or (max_steps and steps >= max_steps):
+            idle[i] = 0 if reward > 0 else idle[i] + 1
+            if term or trunc or (max_steps and steps >= max_steps) or (patience and idle[i] >= patience):
                 live[i] = False
         a_in = action_to_model(torch.as_tensor(np.asarray(env_a)), spec)  # [L, A]
         _, _, _, _, (h_l, c_l) = rnn.step(mu, a_in, (h[:, sel], c[:, sel]))

@@ -80,7 +80,8 @@ class EvalWorker:
         for lo in range(0, len(jobs), width):
             chunk = jobs[lo: lo + width]
             returns[lo: lo + len(chunk)] = real_returns(
-                x[[i for i, _ in chunk]], self.envs, self.vae, self.rnn, self.spec, np.array([s for _, s in chunk]), cap)
+                x[[i for i, _ in chunk]], self.envs, self.vae, self.rnn, self.spec, np.array([s for _, s in chunk]), cap,
+                self.cfg.real_patience)
         return returns.reshape(x.shape[0], len(seeds)).mean(1)
 
     def ping(self) -> bool:
