@@ -146,12 +146,12 @@ def real_cases(quick: bool) -> Iterator[dict]:
         workers[width] = EvalWorker(run_cfg, spec, 0, 1, algo_config=cfg)
         workers[width].load_model(1, model)
         workers[width].evaluate(1, cands[:1], np.array([0]), "real")  # warm-up: envs built, first render
-    rates: dict[int, list[float]] = {1: [], 8: []}
     for rnd in range(2):
+        rate: dict[int, float] = {}  # this round's real steps/s per width
         for width in (1, 8):
             t0 = time.perf_counter()
             workers[width].evaluate(1, cands, np.array([rnd + 1]), "real")
-            rates[width].append(len(cands) * steps / (time.perf_counter() - t0))
+            rate[width] = len(cands) * steps / (time.perf_counter() - t0)
             yield {"case": "real", "env": run_cfg.env.id, "round": rnd, "real_envs": width, "candidates": len(cands),
-                   "steps": steps, "params": p, "real_steps_per_s": round(rates[width][-1], 1),
-                   "over_one_at_a_time": round(rates[width][-1] / rates[1][-1], 3)}
+                   "steps": steps, "params": p, "real_steps_per_s": round(rate[width], 1),
+                   "over_one_at_a_time": round(rate[width] / rate[1], 3)}

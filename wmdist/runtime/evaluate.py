@@ -191,10 +191,11 @@ def dream_check_run(run_dir: str, rollouts: int = 64, episodes: int = 5, stream:
         rows = algo.dream_check(cfg, weights, state, rollouts, episodes)
     except ValueError as err:
         raise ConfigError(f"dream --check: {err}") from None
-    for line in format_check(rows, getattr(cfg.algo, "temperature", None), rollouts, episodes):
+    tau = getattr(cfg.algo, "temperature", None)  # the dream's sampling temperature, where the algorithm has one
+    for line in format_check(rows, tau, rollouts, episodes):
         print(line, file=stream)
     out = Path(run_dir) / "dream_check.json"
-    out.write_text(json.dumps({"checkpoint": ckpt.name, "version": version, "temperature": cfg.algo.temperature,
+    out.write_text(json.dumps({"checkpoint": ckpt.name, "version": version, "temperature": tau,
                                "rollouts": rollouts, "episodes": episodes, "rows": rows}, indent=1) + "\n")
     print(f"wmdist: dream check {out}", file=stream)
     return 0

@@ -5,12 +5,42 @@ import pytest
 import torch
 
 from wmdist.algos.worldmodels.config import WorldModelsConfig
-from wmdist.algos.worldmodels.controller import num_params
+from wmdist.algos.worldmodels.controller import act_batched, num_params
 from wmdist.algos.worldmodels.models import build_rnn, build_vae, to_numpy
-from wmdist.algos.worldmodels.rollout import real_return, real_returns
+from wmdist.algos.worldmodels.rollout import real_returns
 from wmdist.algos.worldmodels.worker import EvalWorker
 from wmdist.config.schema import RunConfig
 from wmdist.envs import EnvConfig, make_env
+from wmdist.nets.actions import action_to_env, action_to_model
+
+
+@torch.no_grad()
+def real_return(
+    params,  # [P] one candidate
+    env,  # a wmdist Env
+    vae,
+    rnn,
+    spec,
+    seed: int,
+    max_steps: int | None = None,
+    patience: int = 0,
+) -> tuple[float, int]:
+    """The plain reference: (return, steps) of one real episode, one step at a time; z_t = V's mean of
+    o_t, h_t from M; with `patience`, it also ends after that many steps without a positive reward."""
+    obs = env.reset(seed)
+    state = rnn.initial(1)
+    total, steps, idle = 0.0, 0, 0
+    while True:
+        mu, _ = vae.encode(torch.as_tensor(np.array(obs))[None])  # [1, Z] (a copy: env frames may be read-only)
+        a = act_batched(params[None], mu[None], state[0][0][None], spec)[0]  # [1] or [1, A]
+        env_a = action_to_env(a, spec)[0]
+        obs, reward, term, trunc = env.step(env_a)
+        total, steps = total + reward, steps + 1
+        idle = 0 if reward > 0 else idle + 1
+        a_in = action_to_model(torch.as_tensor(np.asarray(env_a))[None], spec)  # [1, A]
+        _, _, _, _, state = rnn.step(mu, a_in, state)
+        if term or trunc or (max_steps and steps >= max_steps) or (patience and idle >= patience):
+            return total, steps
 
 
 def _models(spec, z_dim=8, hidden=16):

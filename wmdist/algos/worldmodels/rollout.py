@@ -1,5 +1,6 @@
-"""Scoring controllers: whole batches of candidates in M's dream, or in the real env (one episode
-at a time in `real_return`, the reference; several envs in lockstep in `real_returns`).
+"""Scoring controllers: whole batches of candidates in M's dream, or in the real env (several envs
+in lockstep in `real_returns`; tests/algos/worldmodels/test_real_rollouts.py keeps the plain
+one-episode-at-a-time reference).
 
 Dream (World Models, sec. 4.4, the Doom experiment): from an initial latent z_0 (a real first
 frame's encoding), C acts on [z_t, h_t], M samples z_{t+1} from its mixture at temperature tau
@@ -52,35 +53,6 @@ def dream_fitness(
 
 
 @torch.no_grad()
-def real_return(
-    params: torch.Tensor,  # [P] one candidate
-    env: Any,  # a wmdist Env
-    vae: ConvVAE,
-    rnn: MDNRNN,
-    spec: EnvSpec,
-    seed: int,
-    max_steps: int | None = None,
-    patience: int = 0,
-) -> tuple[float, int]:
-    """(episode return, steps) of one real episode: z_t = V's mean of o_t, h_t from M. With
-    `patience`, the episode also ends after that many steps in a row without a positive reward."""
-    obs = env.reset(seed)
-    state = rnn.initial(1)
-    total, steps, idle = 0.0, 0, 0
-    while True:
-        mu, _ = vae.encode(torch.as_tensor(np.array(obs))[None])  # [1, Z] (a copy: env frames may be read-only)
-        a = act_batched(params[None], mu[None], state[0][0][None], spec)[0]  # [1] or [1, A]
-        env_a = action_to_env(a, spec)[0]
-        obs, reward, term, trunc = env.step(env_a)
-        total, steps = total + reward, steps + 1
-        idle = 0 if reward > 0 else idle + 1
-        a_in = action_to_model(torch.as_tensor(np.asarray(env_a))[None], spec)  # [1, A]
-        _, _, _, _, state = rnn.step(mu, a_in, state)
-        if term or trunc or (max_steps and steps >= max_steps) or (patience and idle >= patience):
-            return total, steps
-
-
-@torch.no_grad()
 def real_returns(
     params: torch.Tensor,  # [J, P] one candidate per episode
     envs: list[Any],  # >= J wmdist Envs, stepped in lockstep
@@ -91,8 +63,9 @@ def real_returns(
     max_steps: int | None = None,
     patience: int = 0,
 ) -> np.ndarray:
-    """[J] returns of J real episodes at once: `real_return` for each, with one batched V and M
-    call per step instead of J (the env steps stay one by one)."""
+    """[J] returns of J real episodes at once, each z_t = V's mean of o_t and h_t from M, with one
+    batched V and M call per step for all of them (the env steps stay one by one). An episode ends
+    at the env's end, at `max_steps`, or after `patience` steps in a row without a positive reward."""
     j = params.shape[0]
     obs = np.stack([envs[i].reset(int(seeds[i])) for i in range(j)])  # [J, H, W, C]
     h, c = rnn.initial(j)  # [1, J, H] each

@@ -71,9 +71,9 @@ class EvalWorker:
             raise RuntimeError("real rollouts need V: the model sent had none")
         jobs = [(i, int(s)) for i in range(x.shape[0]) for s in seeds]  # (candidate, seed) episodes
         width = max(1, min(self.cfg.real_envs, len(jobs)))
-        while len(self.envs) < width:
-            from wmdist.envs.factory import make_env
+        from wmdist.envs.factory import make_env
 
+        while len(self.envs) < width:
             self.envs.append(make_env(self.run_config.env, seed=1000 * self.index + len(self.envs)))
         cap = self.cfg.real_max_steps or None
         returns = np.zeros(len(jobs))
