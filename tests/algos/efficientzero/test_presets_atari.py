@@ -16,7 +16,8 @@ def test_cartpole_preset_has_every_addition_on():
     cfg = load_config(CONFIGS / "efficientzero_cartpole.yaml")
     a = cfg.algo
     assert cfg.algo_name == "efficientzero" and a.value_prefix and a.search.value_prefix
-    assert (a.consistency_weight, a.td_steps, a.value_loss_weight, a.reanalyze_policy_fraction) == (2.0, 5, 0.25, 0.99)
+    assert (a.consistency_weight, a.value_loss_weight, a.reanalyze_policy_fraction) == (2.0, 0.25, 0.99)
+    assert a.td_steps == 50  # authors: 5; the 50-step horizon holds on more seeds here (BENCHMARKS.md)
     assert a.off_policy_correction and cfg.reanalyze.num >= 1
     assert (cfg.replay.sampler, cfg.replay.priority_alpha, cfg.replay.priority_beta) == ("prioritized", 0.6, 0.4)
     assert cfg.eval.every_env_steps > 0  # evaluated by env steps as well as by seconds
