@@ -92,3 +92,17 @@ def test_negative_limits_are_refused():
         Progress(-1, 1.0, io.StringIO())
     with pytest.raises(ValueError, match="total_minutes"):
         Progress(10, -1.0, io.StringIO())
+
+
+def test_a_stage_without_a_loss_shows_its_named_headline_instead():
+    # World Models' controller search reports fitnesses, no loss: `headline_fitness` names its figure,
+    # where the first metric by name (`cma_best_fitness`) would have been shown as a "loss"
+    p = Progress(0, 60.0, io.StringIO(), clock=FakeClock())
+    snap = {**DRIVER_SNAP, "losses": {"cma_best_fitness": 918.0, "cma_gen_mean": 400.0, "headline_fitness": 843.0}}
+    line = p.format(snap)
+    assert "fitness 843" in line and "loss" not in line
+    hub = MetricsHub()
+    hub.set("wmdist_learner_loss", 12.5, name="headline_fitness")
+    hub.set("wmdist_learner_loss", 1.0, name="aaa")
+    assert "fitness 12.5" in p.format(hub.snapshot())
+    assert "loss 1.25" in p.format(DRIVER_SNAP)  # without one, the total loss as before

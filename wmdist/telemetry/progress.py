@@ -53,17 +53,22 @@ class _View:
                 return float(v)
         return None
 
-    def loss(self) -> float | None:
-        """The algorithm's `total` loss if it reports one, else its first loss by name."""
+    def headline(self) -> tuple[str, float | None]:
+        """(label, value) of the learner's figure for the line. A learner whose stage has no loss
+        names its figure `headline_<label>` (World Models' search: `headline_fitness`); else the
+        `total` loss, else the first loss by name."""
         losses = self.s.get("losses")
         if isinstance(losses, Mapping):
             named = {str(k): v for k, v in losses.items() if isinstance(v, (int, float))}
         else:
             prefix = "wmdist_learner_loss{name="
             named = {k[len(prefix) : -1]: v for k, v in self.s.items() if k.startswith(prefix)}
+        heads = sorted(k for k in named if k.startswith(_HEADLINE))
+        if heads:
+            return heads[0][len(_HEADLINE):], float(named[heads[0]])
         if not named:
-            return None
-        return float(named["total"] if "total" in named else named[sorted(named)[0]])
+            return "loss", None
+        return "loss", float(named["total"] if "total" in named else named[sorted(named)[0]])
 
     def replay_steps(self) -> float | None:
         """Steps held by all replay shards together."""
@@ -107,6 +112,7 @@ class _View:
         return " | ".join(parts)
 
 
+_HEADLINE = "headline_"
 _SHARD_SIZE = re.compile(r"^shard\d+_size_steps$")
 _SUMMED_DROP = re.compile(r"^drops_(\w+)$")  # the replay stats' sums over shards
 _HUB_DROP = re.compile(r"^wmdist_replay_drops_total\{shard=\d+,reason=(\w+)\}$")
@@ -165,6 +171,7 @@ class Progress:
                 eta = min(eta, max((self.total_env_steps - steps) / sps, 0.0))
         else:
             steps_text = f"steps {_num(steps)}"
+        label, value = v.headline()
         parts = [
             steps_text,
             f"{_num(sps)}/s",
@@ -172,7 +179,7 @@ class Progress:
             f"{_num(v.num('updates_per_second', 'wmdist_learner_updates_per_second'))}/s",
             f"ret train {_num(v.num('train_return', snapshot_key('wmdist_episode_return', role='train')))}",
             f"eval {_num(v.num('eval_return', snapshot_key('wmdist_episode_return', role='eval')))}",
-            f"loss {_num(v.loss())}",
+            f"{label} {_num(value)}",
             f"replay {_num(v.replay_steps())}",
             f"w v{_num(v.num('version', 'wmdist_weights_version'))}"
             f" gap {_num(v.num('version_gap', 'wmdist_weights_version_gap'))}",

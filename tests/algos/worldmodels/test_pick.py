@@ -44,6 +44,9 @@ def test_the_learner_publishes_the_pick_and_resumes_it():
     metrics = [learner.update(_batch(i)).metrics for i in range(7)]  # V, V, M, M, then 3 generations
     assert "pick_fitness" not in metrics[4] and "pick_fitness" in metrics[5] and "pick_fitness" not in metrics[6]
     assert metrics[5]["pick_fitness"] == max(metrics[5]["reeval_mean"], metrics[5]["reeval_gen_best"])
+    # the console's figure is the published controller's score: the best-ever candidate's until a pick exists
+    assert metrics[4]["headline_fitness"] == metrics[4]["cma_best_fitness"]
+    assert metrics[5]["headline_fitness"] == metrics[6]["headline_fitness"] == metrics[5]["pick_fitness"]
     np.testing.assert_array_equal(learner.get_weights()["controller"], learner.pick.x.astype(np.float32))
     assert not np.array_equal(learner.pick.x, learner.cma.best_x) or learner.pick.source == "best"
     buf = io.BytesIO()
@@ -60,4 +63,5 @@ def test_without_re_evaluation_the_best_ever_candidate_is_published():
     for i in range(6):
         metrics = learner.update(_batch(i)).metrics
     assert "pick_fitness" not in metrics and not learner.pick.has
+    assert metrics["headline_fitness"] == metrics["cma_best_fitness"]
     np.testing.assert_array_equal(learner.get_weights()["controller"], learner.cma.best_x.astype(np.float32))

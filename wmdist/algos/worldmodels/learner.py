@@ -209,7 +209,14 @@ class WorldModelsLearner(Learner):
             out.update({"reeval_mean": float(f[0]), "reeval_gen_best": float(f[1]), "pick_fitness": self.pick.f,
                         "pick_is_mean": float(self.pick.source == "mean")})
         out["generation_seconds"] = time.monotonic() - t0
+        out["headline_fitness"] = self._published_fitness()
         return out
+
+    def _published_fitness(self) -> float:
+        """The published controller's score (its re-score, or the best-ever candidate's): the
+        console shows it as `fitness` while the search has no loss (telemetry/progress.py)."""
+        has_pick = self.cfg.reeval_every and self.pick.has and np.isfinite(self.pick.f)  # -inf: M refitted since
+        return float(self.pick.f if has_pick else self.cma.best_f)
 
     # -- Learner API -------------------------------------------------------------------------
     def update(self, batch: Batch) -> UpdateResult:
@@ -223,7 +230,7 @@ class WorldModelsLearner(Learner):
         elif stage == STAGE_CMA:
             metrics = self.generation()
         else:
-            metrics = {"cma_best_fitness": self.cma.best_f}
+            metrics = {"cma_best_fitness": self.cma.best_f, "headline_fitness": self._published_fitness()}
         self.updates += 1
         metrics["stage"] = float(stage)
         if self.cfg.iterations > 1:
