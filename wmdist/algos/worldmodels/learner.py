@@ -212,11 +212,15 @@ class WorldModelsLearner(Learner):
         out["headline_fitness"] = self._published_fitness()
         return out
 
+    def _publishes_pick(self) -> bool:
+        """The re-evaluated pick is published once one exists; else the best-ever candidate."""
+        return bool(self.cfg.reeval_every and self.pick.has)
+
     def _published_fitness(self) -> float:
         """The published controller's score (its re-score, or the best-ever candidate's): the
         console shows it as `fitness` while the search has no loss (telemetry/progress.py)."""
-        has_pick = self.cfg.reeval_every and self.pick.has and np.isfinite(self.pick.f)  # -inf: M refitted since
-        return float(self.pick.f if has_pick else self.cma.best_f)
+        scored = self._publishes_pick() and np.isfinite(self.pick.f)  # -inf: M refitted since the pick
+        return float(self.pick.f if scored else self.cma.best_f)
 
     # -- Learner API -------------------------------------------------------------------------
     def update(self, batch: Batch) -> UpdateResult:
@@ -239,7 +243,7 @@ class WorldModelsLearner(Learner):
 
     def get_weights(self) -> Weights:
         has = self.cma.generation > 0
-        x = self.pick.x if (self.cfg.reeval_every and self.pick.has) else self.cma.best_x  # [P]
+        x = self.pick.x if self._publishes_pick() else self.cma.best_x  # [P]
         return {**to_numpy(self.vae, "vae"), **to_numpy(self.rnn, "rnn"),
                 "controller": x.astype(np.float32), "has_controller": np.array(float(has), np.float32)}
 
