@@ -26,6 +26,7 @@ from wmdist.runtime.faults import failed_to_start as _failed_to_start
 from wmdist.runtime.faults import one_line as _one_line
 from wmdist.runtime.faults import root_cause as _root_cause
 from wmdist.runtime.faults import transient
+from wmdist.runtime.rates import RATE_WINDOW_SECONDS, WindowRates
 from wmdist.runtime.table import LEARNER_SLICE_SECONDS, LOCAL_LEARNER_SLICE_SECONDS, LOOP, PACED, PERIODIC, BUILTIN_NAMES, Role
 from wmdist.runtime.topology import Topology
 
@@ -112,7 +113,7 @@ class Driver:
         self.last_tick = self.last_plot = self.last_ckpt = self.last_eval = time.monotonic()
         self.last_eval_steps = counters.env_steps
         self.rates = {"env_steps": 0.0, "updates": 0.0}
-        self._rate_base = (time.monotonic(), counters.env_steps, counters.updates)
+        self._rates = WindowRates(RATE_WINDOW_SECONDS, time.monotonic(), self._rate_counts())
         self.last_snapshot: dict = {}
         self.outage_since: float | None = None  # when a role first found the replay store unreachable
         self.last_service_check = time.monotonic()
@@ -406,12 +407,12 @@ class Driver:
         }
         return snap
 
+    def _rate_counts(self) -> dict[str, float]:
+        return {"env_steps": float(self.c.env_steps), "updates": float(self.c.updates)}
+
     def tick(self, force_plot: bool = False) -> dict:
         now = time.monotonic()
-        t0, e0, u0 = self._rate_base
-        if now - t0 > 0.5:
-            self.rates = {"env_steps": (self.c.env_steps - e0) / (now - t0), "updates": (self.c.updates - u0) / (now - t0)}
-            self._rate_base = (now, self.c.env_steps, self.c.updates)
+        self.rates = self._rates.update(now, self._rate_counts())
         self.last_tick = now
         try:
             replay_stats = self.topo.replay.stats()

@@ -6,6 +6,8 @@ classes are matched by name along the error's MRO and its cause chain.
 """
 from __future__ import annotations
 
+import re
+
 # Actor errors that mean "the process died" (Ray restarts collectors and reanalyzers).
 ACTOR_DIED = ("RayActorError", "ActorDiedError", "ActorUnavailableError")
 # redis-py errors that a restarted or reconnecting server clears: worth retrying.
@@ -40,8 +42,22 @@ def transient(err: BaseException) -> bool:
     return not died(err) and bool(_names(err) & set(TRANSIENT))
 
 
+def out_of_memory(err: BaseException) -> str | None:
+    """One line for a process Ray's memory monitor killed (its own message is a paragraph of
+    advice that ends mid-sentence when cut to a line), else None."""
+    if "OutOfMemoryError" not in _names(err):
+        return None
+    used = re.search(r"(\d+(?:\.\d+)?\s*GB\s*/\s*\d+(?:\.\d+)?\s*GB)", str(err))
+    at = f" ({used.group(1)} used)" if used else ""
+    return (f"OutOfMemoryError: Ray's memory monitor killed it: the machine's memory ran short{at}; "
+            f"other jobs on the machine, or lower learner.batch_size / replay.capacity_steps")
+
+
 def root_cause(err: BaseException) -> str:
     """The last 'SomeError: message' line of a remote traceback, else the last line."""
+    oom = out_of_memory(err)
+    if oom:
+        return oom
     lines = [ln.strip() for ln in str(err).splitlines() if ln.strip()]
     for ln in reversed(lines):
         head = ln.split(":", 1)[0]
@@ -51,5 +67,8 @@ def root_cause(err: BaseException) -> str:
 
 
 def one_line(err: BaseException) -> str:
+    oom = out_of_memory(err)
+    if oom:
+        return oom
     text = str(err).strip().splitlines()
     return f"{type(err).__name__}: {text[-1] if text else ''}"[:400]

@@ -102,6 +102,7 @@ def _prepare(cfg: RunConfig | None, resume: str | None, overrides: list[str] | N
     except the exporter's socket, which the caller closes."""
     from wmdist.runtime import checkpoint as ck
     from wmdist.runtime import preflight as pf
+    from wmdist.runtime.preflight_memory import check_memory
 
     ckpt, state = None, None
     if resume:
@@ -115,6 +116,7 @@ def _prepare(cfg: RunConfig | None, resume: str | None, overrides: list[str] | N
     assert cfg is not None
     spec, algo = pf.check_env_and_algo(cfg)
     fields = algo.step_fields()
+    check_memory(cfg, fields)
     if ckpt is not None:
         state = pf.check_checkpoint(Path(resume), ckpt, cfg, algo)
         pf.check_replay_checkpoint(ckpt, cfg, fields)

@@ -48,13 +48,13 @@ _TRAIN_EVAL = ("train", "eval")
 METRICS: dict[str, MetricDef] = {
     # acting
     "wmdist_env_steps_total": _c("Environment steps taken by all collectors."),
-    "wmdist_env_steps_per_second": _g("Environment steps per second over the last report interval."),
+    "wmdist_env_steps_per_second": _g("Environment steps per second over the last 30 s (wmdist.runtime.rates)."),
     "wmdist_episodes_total": _c("Episodes finished, by role.", "role", role=_TRAIN_EVAL),
     "wmdist_episode_return": _g("Mean return of the episodes finished in the last interval.", "role", role=_TRAIN_EVAL),
     "wmdist_episode_length": _g("Mean length in steps of the episodes finished in the last interval.", "role", role=_TRAIN_EVAL),
     # learning
     "wmdist_learner_updates_total": _c("Learner updates applied."),
-    "wmdist_learner_updates_per_second": _g("Learner updates per second over the last report interval."),
+    "wmdist_learner_updates_per_second": _g("Learner updates per second over the last 30 s (wmdist.runtime.rates)."),
     "wmdist_learner_loss": _g("Latest value of each learner loss or scalar the algorithm reports.", "name"),
     "wmdist_learner_nan_skips_total": _c("Updates skipped because the loss was not finite."),
     "wmdist_train_ratio": _g("Replayed steps per environment step, measured (the limiter's target is in the config)."),
