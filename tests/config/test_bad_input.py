@@ -278,3 +278,31 @@ def test_packed_windows_are_refused_for_muzero(tmp_path, capsys):
     err = capsys.readouterr().err.strip()
     assert code == 2 and err.startswith("wmdist: error: replay.pack_episodes: muzero's learner") and "\n" not in err
     assert not list(tmp_path.iterdir())
+
+
+# --- values that would start a run that cannot work (session 32) ------------------------
+
+
+@pytest.mark.parametrize("name", ["../../etc", "a/b", "..\\up", ".hidden", "tab\there"])
+def test_run_names_with_a_path_are_refused(name):
+    # `run.name=../../etc` used to create /etc-<time> from a run.dir of /tmp/x
+    msg = _one_line_error([f"run.name={name}"], MUZERO)
+    assert msg.startswith("run.name ") and "one folder name" in msg
+
+
+@pytest.mark.parametrize("name", ["my-run", "muzero_cartpole.v2", "run 1"])
+def test_ordinary_run_names_pass(name):
+    assert load_config(MUZERO, [f"run.name={name}"]).run.name == name
+
+
+@pytest.mark.parametrize("override, message", [
+    ("replay.min_size=60001", "would wait forever"),          # capacity_steps 60,000 in the preset
+    ("run.seed=99999999999999999999", "run.seed"),              # torch and numpy refuse it after start-up
+    ("eval.envs=100000", "eval.envs"),
+])
+def test_values_a_run_cannot_serve_are_refused(override, message):
+    assert message in _one_line_error([override], MUZERO)
+
+
+def test_min_size_up_to_the_capacity_passes():
+    assert load_config(MUZERO, ["replay.min_size=60000"]).replay.min_size == 60000

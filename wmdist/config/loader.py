@@ -257,6 +257,16 @@ def check_consistency(cfg: RunConfig) -> None:
             raise ConfigError(str(err).strip().splitlines()[0]) from None
     if cfg.eval.num_simulations and not hasattr(getattr(cfg.algo, "search", None), "num_simulations"):
         raise ConfigError(f"eval.num_simulations: algorithm '{cfg.algo_name}' has no tree search (leave it 0)")
+    check_run_name(cfg.run.name)
+
+
+def check_run_name(name: str) -> None:
+    """The run directory is <run.dir>/<name>-<time>: a name with a path in it would put the run
+    (and everything it writes) outside run.dir, e.g. `../../etc`."""
+    bad = [c for c in name if c in "/\\" or not c.isprintable()]
+    if bad or name.startswith(".") or not name.strip():
+        raise ConfigError(f"run.name {name!r}: a run name is one folder name (no '/', '\\', control characters "
+                          f"or leading '.'); it names <run.dir>/<name>-<time>")
 
 
 def to_dict(cfg: Any) -> Any:

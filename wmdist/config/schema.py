@@ -18,7 +18,7 @@ from wmdist.replay.config import ReplayConfig
 class RunSection:
     name: str = param("", "run name; the run directory is <dir>/<name> ('' = <config name>-<time>)")
     dir: str = param("runs", "parent folder of run directories")
-    seed: int = param(0, "seed for envs, networks and search", ge=0)
+    seed: int = param(0, "seed for envs, networks and search", ge=0, le=2**32 - 1)  # numpy's and gymnasium's range
     max_env_steps: int = param(50_000, "stop after this many env steps (0 = no limit)", ge=0)
     max_updates: int = param(0, "stop after this many learner updates (0 = no limit)", ge=0)
     max_minutes: float = param(30.0, "stop after this much wall time (0 = no limit)", ge=0)
@@ -72,7 +72,7 @@ class EvalConfig:
                                     "(0 = not by steps), so a run that learns in 3k steps is seen doing so; "
                                     "with both 0 there is no evaluator", ge=0)
     episodes: int = param(10, "greedy episodes per evaluation", ge=1)
-    envs: int = param(5, "envs the evaluator steps together", ge=1)
+    envs: int = param(5, "envs the evaluator steps together", ge=1, le=4096)
     cpus: float = param(0.25, "Ray CPUs for the evaluator", gt=0)
     opponent_rollouts: int = param(200, "board:connect4: random rollouts per move of the MCTS (UCT) opponent", ge=1)
     num_simulations: int = param(0, "MuZero family: search simulations per evaluation move (0 = algo.search's own); "

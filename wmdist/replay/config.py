@@ -60,3 +60,6 @@ class ReplayConfig:
                 f"replay.capacity_steps={self.capacity_steps} holds less than one sequence per shard "
                 f"(seq_len {self.seq_len} x shards {self.shards})"
             )
+        if self.min_size > self.capacity_steps:  # a store that never holds min_size steps never lets sampling start
+            raise ValueError(f"replay.min_size={self.min_size} exceeds replay.capacity_steps={self.capacity_steps}: "
+                             f"the learner would wait forever for its first batch")
