@@ -128,3 +128,35 @@ def test_board_bench_on_connect4_plays_the_runs_uct_opponent_and_plots_games_won
     assert res["games"] == 4 and res["won_fraction"] == res["won"] / 4
     assert "lost_lines" not in res  # the whole-tree judge is for tic-tac-toe only
     assert png.stat().st_size > 1000
+
+
+def _one_line_exit_2(capsys, argv: list[str]) -> str:
+    assert main(argv) == 2
+    captured = capsys.readouterr()
+    lines = captured.err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("wmdist: error: "), captured.err
+    assert "Traceback" not in captured.out + captured.err
+    assert "mean return" not in captured.out  # failed before playing anything
+    return lines[0]
+
+
+def test_a_config_edited_after_training_is_one_line_naming_the_mismatch(tmp_path, capsys):
+    from tests.runtime.run_dirs import run_dir_with_checkpoint
+
+    run = run_dir_with_checkpoint(tmp_path, "muzero_cartpole")
+    text = (run / "config.yaml").read_text()
+    assert "latent_dim: 32" in text
+    (run / "config.yaml").write_text(text.replace("latent_dim: 32", "latent_dim: 48"))
+    for argv in (["eval", str(run), "--episodes", "1"], ["dream", str(run)]):
+        line = _one_line_exit_2(capsys, argv)
+        assert "does not fit the model" in line and "size mismatch" in line and "config.yaml" in line
+
+
+def test_output_paths_are_checked_before_any_episode(tmp_path, capsys):
+    run = _run_dir(tmp_path, np.zeros((4, 2), np.float32))
+    line = _one_line_exit_2(capsys, ["eval", str(run), "--episodes", "1", "--video", str(tmp_path / "no" / "v.gif")])
+    assert "no such folder" in line
+    line = _one_line_exit_2(capsys, ["eval", str(run), "--episodes", "1", "--video", str(tmp_path)])
+    assert "is a folder" in line
+    line = _one_line_exit_2(capsys, ["dream", str(run), "--out", str(tmp_path / "no" / "d.gif")])
+    assert "no such folder" in line

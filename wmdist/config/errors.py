@@ -20,3 +20,13 @@ def first_line(err: BaseException) -> str:
     one-line errors built from exceptions whose text may span many lines."""
     lines = [ln.strip() for ln in str(err).strip().splitlines() if ln.strip()]
     return (lines[0] if lines else type(err).__name__)[:300]
+
+
+def mismatch_line(err: BaseException) -> str:
+    """The informative line of a failed `load_state_dict` (torch's first line is only 'Error(s) in
+    loading state_dict for Model:'): the first size mismatch or missing/unexpected key."""
+    lines = [ln.strip() for ln in str(err).splitlines() if ln.strip()]
+    for ln in lines:
+        if ln.startswith(("size mismatch", "Missing key", "Unexpected key")):
+            return ln[:300]
+    return first_line(err)

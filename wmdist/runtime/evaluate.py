@@ -12,7 +12,7 @@ from typing import IO, Callable
 import numpy as np
 
 from wmdist.algos.base import CHECKS_DREAM, PLOTS_EMBEDDINGS, PREDICTS_OBSERVATIONS
-from wmdist.config.errors import ConfigError
+from wmdist.config.errors import ConfigError, mismatch_line
 from wmdist.runtime import checkpoint as ck
 from wmdist.runtime.board_eval import default_opponent, greedy_action, judge_lines, play_games
 from wmdist.runtime.roles.setup import build_algorithm, evaluation_config
@@ -30,7 +30,23 @@ def load_run(run_dir: str, overrides: list[str] | None = None):
         version, weights = ck.load_weights(ckpt)
     except Exception as err:  # noqa: BLE001 - a damaged or hand-edited file: one line, not a traceback
         raise ConfigError(ck.unreadable_message(ckpt, err)) from None
+    try:  # a config.yaml edited after training (another width, another algorithm) no longer fits the weights
+        algo.make_policy("cpu").set_weights(weights, version)
+    except (RuntimeError, ValueError, KeyError) as err:
+        raise ConfigError(f"{ckpt} does not fit the model {Path(run_dir) / 'config.yaml'} describes "
+                          f"({mismatch_line(err)}); was config.yaml edited after training?") from None
     return cfg, spec, algo, version, weights, ckpt
+
+
+def check_output_path(path: str | None, flag: str) -> None:
+    """An output file whose folder is missing fails before the episodes are played, not after."""
+    if path is None:
+        return
+    folder = Path(path).expanduser().resolve().parent
+    if not folder.is_dir():
+        raise ConfigError(f"{flag} {path}: no such folder {folder}")
+    if Path(path).is_dir():
+        raise ConfigError(f"{flag} {path} is a folder; give a file name")
 
 
 def _human(env, out: IO[str]) -> Callable[[object], int]:
@@ -65,6 +81,7 @@ def evaluate_run(run_dir: str, episodes: int = 10, video: str | None = None, hum
                  out: IO[str] | None = None, progress_seconds: float = 10.0, simulations: int = 0) -> int:
     """`simulations` > 0: search this many simulations per move (as `eval.num_simulations`)."""
     out = out or sys.stdout  # looked up per call: a default bound at import outlives a redirected stdout
+    check_output_path(video, "--video")
     cfg, spec, algo, version, weights, ckpt = load_run(run_dir, [f"eval.num_simulations={simulations}"] if simulations else None)
     if cfg.eval.num_simulations:  # the in-training evaluator's search count, not self-play's
         algo = build_algorithm(evaluation_config(cfg), spec, cfg.run.seed + 31_337)
@@ -149,6 +166,7 @@ def record_video(cfg, algo, weights, version: int, path: str, max_steps: int = 1
 
 def dream_run(run_dir: str, out: str | None = None, horizon: int = 45, stream: IO[str] | None = None) -> int:
     stream = stream or sys.stdout
+    check_output_path(out, "--out")
     cfg, spec, algo, version, weights, ckpt = load_run(run_dir)
     from wmdist.envs.factory import make_env
 

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from wmdist.config.errors import ConfigError, first_line
+from wmdist.config.errors import ConfigError, first_line, mismatch_line
 from wmdist.config.schema import RunConfig
 from wmdist.envs.spec import EnvSpec
 
@@ -179,7 +179,7 @@ def check_checkpoint(run_dir: Path, ckpt: Path, cfg: RunConfig, algo: Any) -> di
     try:
         algo.make_learner("cpu").load_state_dict(state["learner"])
     except Exception as err:  # noqa: BLE001 - size mismatch, missing keys, another algorithm
-        raise ConfigError(f"{ckpt} does not fit the model this config builds ({first_line(err)}); "
+        raise ConfigError(f"{ckpt} does not fit the model this config builds ({mismatch_line(err)}); "
                           f"overrides that change the model's shape cannot resume a run") from None
     return state
 
