@@ -68,6 +68,20 @@ def test_learning_bench_refuses_a_bad_config_before_any_run(tmp_path, monkeypatc
     assert not (tmp_path / "runs").exists() and not (tmp_path / "c.png").exists()
 
 
+@pytest.mark.parametrize("extra, message", [
+    (["--target", "nan"], "--target"),                  # NaN compares false: no run could ever be judged met
+    (["--target", "1", "--budget-env-steps", "0"], "--budget-env-steps"),
+    (["--target", "1", "--budget-minutes", "-2"], "--budget-minutes"),
+])
+def test_learning_bench_refuses_a_target_or_budget_it_cannot_judge(tmp_path, monkeypatch, capsys, extra, message):
+    from wmdist.bench import learning
+
+    monkeypatch.setattr(learning.subprocess, "run", lambda *a, **k: pytest.fail("a run was started"))
+    assert learning.main([MUZERO, *extra, "--png", str(tmp_path / "c.png"), "--runs-dir", str(tmp_path / "r")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith(f"wmdist: error: {message}"), err
+
+
 # --- 2. numbers as people write them ---------------------------------------------------
 
 

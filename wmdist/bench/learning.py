@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import subprocess
 import sys
 import threading
@@ -214,6 +215,17 @@ def config_problem(config: str, overrides: list[str], seeds: list[int]) -> str |
     return None
 
 
+def argument_problem(target: float, budget_env_steps: int | None, budget_minutes: float | None) -> str | None:
+    """A target or budget that no run can be judged against (NaN compares false with every return)."""
+    if not math.isfinite(target):
+        return f"--target must be a finite number, got {target}"
+    if budget_env_steps is not None and budget_env_steps <= 0:
+        return f"--budget-env-steps must be > 0, got {budget_env_steps}"
+    if budget_minutes is not None and not (math.isfinite(budget_minutes) and budget_minutes > 0):
+        return f"--budget-minutes must be a positive number, got {budget_minutes}"
+    return None
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("config")
@@ -233,7 +245,7 @@ def main(argv: list[str] | None = None) -> int:
         if kv.startswith("run.dir="):
             a.runs_dir = kv.split("=", 1)[1]
     budget_seconds = a.budget_minutes * 60 if a.budget_minutes is not None else None
-    problem = config_problem(a.config, a.set, a.seeds)
+    problem = argument_problem(a.target, a.budget_env_steps, a.budget_minutes) or config_problem(a.config, a.set, a.seeds)
     if problem:  # a bad config would fail every seed in turn: one line, exit 2, before any run
         print(f"wmdist: error: {problem}", file=sys.stderr)
         return 2
