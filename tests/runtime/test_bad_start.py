@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 from tests.runtime.run_dirs import run_dir_with_checkpoint
+from tests.runtime.one_line import one_line_exit_2
 from wmdist.cli import main
 from wmdist.runtime.checkpoint import CKPT_DIR, clean_partial, latest_checkpoint, save_checkpoint
 
@@ -22,12 +23,7 @@ MUZERO = str(ROOT / "configs" / "muzero_cartpole.yaml")
 
 
 def _one_line_exit_2(capsys, argv: list[str]) -> str:
-    assert main(argv) == 2
-    captured = capsys.readouterr()
-    lines = captured.err.strip().splitlines()
-    assert len(lines) == 1 and lines[0].startswith("wmdist: error: "), captured.err
-    assert "Traceback" not in captured.out + captured.err
-    return lines[0]
+    return one_line_exit_2(capsys, argv)[0]
 
 
 @pytest.fixture

@@ -6,6 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
+from tests.runtime.one_line import one_line_exit_2
 from wmdist.cli import main
 from wmdist.config.loader import dump_yaml, load_config
 from wmdist.runtime.checkpoint import save_checkpoint
@@ -131,13 +132,9 @@ def test_board_bench_on_connect4_plays_the_runs_uct_opponent_and_plots_games_won
 
 
 def _one_line_exit_2(capsys, argv: list[str]) -> str:
-    assert main(argv) == 2
-    captured = capsys.readouterr()
-    lines = captured.err.strip().splitlines()
-    assert len(lines) == 1 and lines[0].startswith("wmdist: error: "), captured.err
-    assert "Traceback" not in captured.out + captured.err
-    assert "mean return" not in captured.out  # failed before playing anything
-    return lines[0]
+    line, out = one_line_exit_2(capsys, argv)
+    assert "mean return" not in out  # failed before playing anything
+    return line
 
 
 def test_a_config_edited_after_training_is_one_line_naming_the_mismatch(tmp_path, capsys):

@@ -10,6 +10,7 @@ from pathlib import Path
 import pytest
 
 from wmdist.algos.base import FieldSpec
+from tests.runtime.one_line import one_line_exit_2
 from wmdist.cli import main
 from wmdist.config.errors import ConfigError
 from wmdist.config.loader import load_config
@@ -30,12 +31,7 @@ def nothing_starts(monkeypatch):
 
 
 def _one_line_exit_2(capsys, argv: list[str]) -> str:
-    assert main(argv) == 2
-    captured = capsys.readouterr()
-    lines = captured.err.strip().splitlines()
-    assert len(lines) == 1 and lines[0].startswith("wmdist: error: "), captured.err
-    assert "Traceback" not in captured.out + captured.err
-    return lines[0]
+    return one_line_exit_2(capsys, argv)[0]
 
 
 @pytest.mark.parametrize("sets, names", [
