@@ -14,7 +14,6 @@ import pytest
 
 from tests.runtime.run_dirs import run_dir_with_checkpoint
 from tests.runtime.one_line import one_line_exit_2
-from wmdist.cli import main
 from wmdist.runtime.checkpoint import CKPT_DIR, clean_partial, latest_checkpoint, save_checkpoint
 
 ROOT = Path(__file__).resolve().parents[2]

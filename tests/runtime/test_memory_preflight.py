@@ -11,7 +11,6 @@ import pytest
 
 from wmdist.algos.base import FieldSpec
 from tests.runtime.one_line import one_line_exit_2
-from wmdist.cli import main
 from wmdist.config.errors import ConfigError
 from wmdist.config.loader import load_config
 from wmdist.runtime import train as train_mod
