@@ -40,7 +40,7 @@ def step_bytes(fields: dict) -> int:
     return 1 + sum(int(np.prod(s.shape)) * np.dtype(s.dtype).itemsize for s in fields.values())
 
 
-def _size(n: float) -> str:
+def format_bytes(n: float) -> str:
     for unit in ("B", "KiB", "MiB", "GiB", "TiB", "PiB"):
         if n < 1024 or unit == "PiB":
             return f"{n:.1f} {unit}" if unit != "B" else f"{int(n)} B"
@@ -65,8 +65,8 @@ def check_memory(cfg, fields: dict, memory: int | None = None) -> None:
         need = size * seq_len * per_step
         if need > BATCH_SHARE * memory:
             raise ConfigError(
-                f"{name}: {size} windows of {seq_len} steps are {_size(need)} of raw data per batch, more than "
-                f"a quarter of this machine's memory ({_size(memory)}); lower {name} or replay.seq_len")
+                f"{name}: {size} windows of {seq_len} steps are {format_bytes(need)} of raw data per batch, more than "
+                f"a quarter of this machine's memory ({format_bytes(memory)}); lower {name} or replay.seq_len")
     r = cfg.replay
     local_store = r.backend == "memory" or (r.backend == "redis" and not r.redis_url)
     if local_store and not cfg.ray.address:
@@ -79,5 +79,5 @@ def check_memory(cfg, fields: dict, memory: int | None = None) -> None:
         need = steps * per_step
         if need > memory:
             raise ConfigError(
-                f"replay.capacity_steps: {steps} stored steps of {_size(per_step)} are {_size(need)}, more than this "
-                f"machine's memory ({_size(memory)}); lower replay.capacity_steps or set replay.capacity_bytes")
+                f"replay.capacity_steps: {steps} stored steps of {format_bytes(per_step)} are {format_bytes(need)}, more than this "
+                f"machine's memory ({format_bytes(memory)}); lower replay.capacity_steps or set replay.capacity_bytes")

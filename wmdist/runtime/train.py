@@ -103,6 +103,7 @@ def _prepare(cfg: RunConfig | None, resume: str | None, overrides: list[str] | N
     from wmdist.runtime import checkpoint as ck
     from wmdist.runtime import preflight as pf
     from wmdist.runtime.preflight_memory import check_memory
+    from wmdist.runtime.preflight_model import check_model
 
     ckpt, state = None, None
     if resume:
@@ -117,6 +118,7 @@ def _prepare(cfg: RunConfig | None, resume: str | None, overrides: list[str] | N
     spec, algo = pf.check_env_and_algo(cfg)
     fields = algo.step_fields()
     check_memory(cfg, fields)
+    check_model(cfg, algo)  # before a resume builds the learner for real
     if ckpt is not None:
         state = pf.check_checkpoint(Path(resume), ckpt, cfg, algo)
         pf.check_replay_checkpoint(ckpt, cfg, fields)

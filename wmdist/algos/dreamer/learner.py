@@ -8,6 +8,7 @@ from typing import Any, Mapping
 import numpy as np
 import torch
 
+from wmdist.nets.generator import seeded_generator
 from wmdist.algos.base import Batch, Learner, NonFiniteLoss, UpdateResult, Weights
 from wmdist.algos.dreamer.config import DreamerConfig
 from wmdist.algos.dreamer.imagine import ActorCriticLoss, Start
@@ -54,7 +55,7 @@ class DreamerLearner(Learner):
         self.wm_opt = GuardedStep(self.wm.parameters(), opt(cfg.model_lr, cfg.model_clip))
         self.actor_opt = GuardedStep(self.ac.actor.parameters(), opt(cfg.actor_lr, cfg.ac_clip, **actor_schedule))
         self.critic_opt = GuardedStep(self.ac.critic.parameters(), opt(cfg.critic_lr, cfg.ac_clip))
-        self.generator = torch.Generator(self.device).manual_seed(seed)
+        self.generator = seeded_generator(self.device, seed)
         self.updates = 0
         follow = "bf16" if cfg.bf16 else "fp32"
         self.precision = PhasePrecision(

@@ -5,6 +5,7 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
+from wmdist.nets.generator import seeded_generator
 from wmdist.algos.base import Weights
 from wmdist.algos.filtering import FilteringPolicy
 from wmdist.algos.dreamer.config import DreamerConfig
@@ -25,7 +26,7 @@ class DreamerPolicy(FilteringPolicy):
         self.cfg, self.spec, self.device = cfg, spec, torch.device(device)
         self.wm = WorldModel(cfg, spec).to(self.device).eval()
         self.ac = ActorCritic(cfg, spec, self.wm.rssm.z_dim).to(self.device).eval()
-        self.generator = torch.Generator(self.device).manual_seed(seed)
+        self.generator = seeded_generator(self.device, seed)
         self.version = -1
         self.env_steps = 0
 

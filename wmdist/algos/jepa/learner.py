@@ -14,6 +14,7 @@ from typing import Any, Mapping
 import numpy as np
 import torch
 
+from wmdist.nets.generator import seeded_generator
 from wmdist.algos.base import Batch, Learner, NonFiniteLoss, UpdateResult, Weights
 from wmdist.algos.jepa.config import JepaConfig
 from wmdist.algos.jepa.model import FRAME_CHANNELS, JepaModel, model_weights, recalibrate_batchnorm
@@ -37,7 +38,7 @@ class JepaLearner(Learner):
         torch.manual_seed(seed)
         self.model = JepaModel(cfg, spec.action_dim).to(self.device)
         self.opt = GuardedStep(self.model.parameters(), OptimConfig(kind="adam", lr=cfg.lr, clip_norm=cfg.grad_clip))
-        self.generator = torch.Generator(self.device).manual_seed(seed)
+        self.generator = seeded_generator(self.device, seed)
         self.updates = 0
         self._frames: deque[torch.Tensor] = deque()  # the latest batches' real frames, [N_i, 64, 64, 3] uint8 each
 

@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 import torch
 
+from wmdist.nets.generator import seeded_generator
 from wmdist.algos.base import Policy, Weights
 from wmdist.algos.jepa.config import JepaConfig
 from wmdist.algos.jepa.model import JepaModel, load_model
@@ -35,7 +36,7 @@ class JepaPolicy(Policy):
     def __init__(self, cfg: JepaConfig, spec: EnvSpec, device: str = "cpu", seed: int = 0) -> None:
         self.cfg, self.spec, self.device = cfg, spec, torch.device(device)
         self.model = JepaModel(cfg, spec.action_dim).to(self.device).eval()
-        self.generator = torch.Generator(self.device).manual_seed(seed)
+        self.generator = seeded_generator(self.device, seed)
         self.rng = np.random.default_rng(seed)
         self.version, self.trained_updates = -1, 0
         self.z_hist: torch.Tensor | None = None  # [E, h, D]

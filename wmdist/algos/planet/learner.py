@@ -12,6 +12,7 @@ from typing import Any, Mapping
 import numpy as np
 import torch
 
+from wmdist.nets.generator import seeded_generator
 from wmdist.algos.base import Batch, Learner, NonFiniteLoss, UpdateResult, Weights
 from wmdist.algos.dreamer.precision import PhasePrecision
 from wmdist.algos.planet.config import PlaNetConfig
@@ -32,7 +33,7 @@ class PlaNetLearner(Learner):
         self.wm = WorldModel(cfg.world_model(), spec).to(self.device)
         self.opt = GuardedStep(self.wm.parameters(), OptimConfig(kind="adam", lr=cfg.model_lr, eps=cfg.adam_eps,
                                                                  clip_norm=cfg.model_clip))
-        self.generator = torch.Generator(self.device).manual_seed(seed)
+        self.generator = seeded_generator(self.device, seed)
         self.updates = 0
         # PlaNet's update is Dreamer's world-model phase alone
         self.precision = PhasePrecision({"world_model": cfg.precision}, self.device, cfg.precision_trials)

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import torch
 
+from wmdist.nets.generator import seeded_generator
 from wmdist.algos.base import Weights
 from wmdist.algos.filtering import FilteringPolicy
 from wmdist.algos.planet.config import PlaNetConfig
@@ -28,7 +29,7 @@ class PlaNetPolicy(FilteringPolicy):
     def __init__(self, cfg: PlaNetConfig, spec: EnvSpec, device: str = "cpu", seed: int = 0) -> None:
         self.cfg, self.spec, self.device = cfg, spec, torch.device(device)
         self.wm = WorldModel(cfg.world_model(), spec).to(self.device).eval()
-        self.generator = torch.Generator(self.device).manual_seed(seed)
+        self.generator = seeded_generator(self.device, seed)
         self.version = -1
         self.plan: torch.Tensor | None = None  # [E, H, A] the last plan (warm start)
 

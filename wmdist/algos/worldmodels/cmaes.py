@@ -14,6 +14,11 @@ import numpy as np
 MIN_POPSIZE = 2  # cma's weighted recombination needs at least two parents' weights
 
 
+def covariance_bytes(dim: int) -> int:
+    """What full-covariance CMA-ES holds at least: the matrix C and its eigenvectors B, float64 [P, P] each."""
+    return 2 * dim * dim * 8
+
+
 class CMAES:
     def __init__(self, dim: int, popsize: int, sigma0: float, seed: int = 0, x0: np.ndarray | None = None) -> None:
         if popsize < MIN_POPSIZE:

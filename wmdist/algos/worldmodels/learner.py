@@ -20,6 +20,7 @@ from typing import Any, Mapping
 import numpy as np
 import torch
 
+from wmdist.nets.generator import seeded_generator
 from wmdist.algos.base import Batch, Learner, NonFiniteLoss, UpdateResult, Weights
 from wmdist.algos.worldmodels.cmaes import CMAES
 from wmdist.algos.worldmodels.config import WorldModelsConfig
@@ -46,7 +47,7 @@ class WorldModelsLearner(Learner):
         self.rnn = build_rnn(cfg, spec).to(self.device)
         self.vae_opt = GuardedStep(self.vae.parameters(), OptimConfig(kind="adam", lr=cfg.vae_lr))
         self.rnn_opt = GuardedStep(self.rnn.parameters(), OptimConfig(kind="adam", lr=cfg.rnn_lr, clip_norm=cfg.rnn_clip))
-        self.generator = torch.Generator(self.device).manual_seed(seed)
+        self.generator = seeded_generator(self.device, seed)
         self.n_params = num_params(spec, cfg.z_dim, cfg.rnn_hidden, cfg.controller_h)
         self.cma = CMAES(self.n_params, cfg.popsize, cfg.sigma0, seed)
         self.pick = ControllerPick(self.n_params)
