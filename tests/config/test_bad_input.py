@@ -320,3 +320,57 @@ def test_values_a_run_cannot_serve_are_refused(override, message):
 
 def test_min_size_up_to_the_capacity_passes():
     assert load_config(MUZERO, ["replay.min_size=60000"]).replay.min_size == 60000
+
+
+# --- values the pre-start checks used to let through (session 33) ------------------------
+
+
+@pytest.fixture
+def nothing_starts(monkeypatch):
+    from wmdist.runtime import train as train_mod
+
+    def started(*args, **kwargs):
+        raise AssertionError("the run started: the check did not stop it first")
+
+    monkeypatch.setattr(train_mod, "_run", started)
+
+
+@pytest.mark.parametrize("sets, message", [
+    (["algo.unroll_steps=60"], "algo.unroll_steps (60) must be below replay.seq_len (60)"),
+    (["ray.num_gpus=2"], "ray.num_gpus=2, but torch sees 0"),
+    (["ray.object_store_mb=100000000"], "ray.object_store_mb=100000000 is more than this machine's memory"),
+    # the evaluator's gpus used to be ignored (it asked Ray for its cpus only)
+    (["ray.num_gpus=0", "eval.gpus=1"], "evaluator 1.0 x 1); lower actors.num or the per-role gpus"),
+])
+def test_what_the_machine_or_the_windows_cannot_serve_is_one_line(tmp_path, capsys, nothing_starts, sets, message):
+    import torch
+    from tests.runtime.one_line import one_line_exit_2
+
+    if torch.cuda.is_available():
+        pytest.skip("the GPU cases assume a machine without CUDA")
+    line, _ = one_line_exit_2(capsys, ["train", MUZERO, "--set", f"run.dir={tmp_path}", *sets])
+    assert message in line
+    assert not any(tmp_path.iterdir())
+
+
+@pytest.mark.timeout(30)
+def test_a_td_horizon_past_the_window_gives_the_same_targets_at_once():
+    # the n-step loop ran to td_steps: 1e12 hung the learner after start-up
+    import numpy as np
+    from wmdist.algos.muzero.targets import make_targets
+
+    rng = np.random.default_rng(0)
+    b, t, a = 4, 12, 2
+    first = np.zeros((b, t), bool)
+    first[:, 0] = True
+    last = np.zeros((b, t), bool)
+    last[0, 7] = True
+    batch = {"reward": rng.normal(size=(b, t)).astype(np.float32), "first": first, "last": last,
+             "terminal": last.copy(), "mask": np.ones((b, t), bool), "action": rng.integers(0, a, (b, t)),
+             "search_policy": np.full((b, t, a), 0.5, np.float32)}
+    t0, valid = np.array([0, 3, 5, 1]), np.ones(b, bool)
+    at_window = make_targets(batch, t0, valid, 3, t - 1, 0.97, a, np.random.default_rng(1))
+    past = make_targets(batch, t0, valid, 3, 10**12, 0.97, a, np.random.default_rng(1))
+    for name in ("value_partial", "boot_idx", "boot_disc", "boot_net", "value_w"):
+        assert np.array_equal(getattr(at_window, name), getattr(past, name)), name
+    assert (at_window.boot_idx >= 0).any() and (at_window.value_partial != 0).any()

@@ -8,6 +8,10 @@ from __future__ import annotations
 import dataclasses
 from typing import Any, Sequence
 
+# The most layers or blocks a network-depth field accepts: far past any paper's model (MuZero:
+# 16 residual blocks), low enough that a typo such as 1e12 is refused instead of building forever.
+MAX_LAYERS = 1000
+
 
 def param(
     default: Any,

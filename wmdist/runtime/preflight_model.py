@@ -17,7 +17,7 @@ from typing import Any, Iterator
 import torch
 from torch import nn
 
-from wmdist.config.errors import ConfigError
+from wmdist.config.errors import ConfigError, first_line
 from wmdist.runtime.preflight_memory import format_bytes, node_memory_bytes
 
 TRAINED_COPIES = 4  # weight, gradient, Adam's first and second moments
@@ -94,7 +94,12 @@ def check_model(cfg: Any, algo: Any, memory: int | None = None) -> None:
         return
     try:
         learner, policy = measure(algo)
-    except Exception:  # noqa: BLE001 - an op the meta device lacks: leave it to the run itself
+    except RuntimeError as err:
+        if "overflow" in str(err):  # a tensor with more elements than torch can index
+            raise ConfigError(f"the model this config builds is too large for torch to size ({first_line(err)}); "
+                              f"lower the algo.* size that makes it") from None
+        return  # an op the meta device lacks: leave it to the run itself
+    except Exception:  # noqa: BLE001 - as above
         return
     copies = policy_copies(cfg)
     need = learner.bytes_held + copies * policy.bytes_held

@@ -17,6 +17,9 @@ def roles(cfg: RunConfig, table: tuple[Role, ...] | None = None) -> dict[str, tu
     return {r.name: (r.resources_of(cfg), r.count(cfg)) for r in table if r.count(cfg) > 0}
 
 
+_FIELD = {"CPU": "cpus", "GPU": "gpus"}  # the per-role field that asks for each resource
+
+
 def check_fits(cfg: RunConfig, cluster: dict[str, float], table: tuple[Role, ...] | None = None) -> None:
     """One clear error, before any actor starts, when the roles ask for more than exists."""
     per_role = roles(cfg, table)
@@ -32,4 +35,4 @@ def check_fits(cfg: RunConfig, cluster: dict[str, float], table: tuple[Role, ...
             detail = ", ".join(f"{r} {res.cpus if key == 'CPU' else res.gpus if key == 'GPU' else res.custom.get(key, 0)} x {n}"
                                for r, (res, n) in per_role.items())
             raise ConfigError(f"the config needs {amount:g} {key} but the cluster has {have:g} ({detail}); "
-                              f"lower actors.num or the per-role cpus")
+                              f"lower actors.num or the per-role {_FIELD.get(key, 'resources')}")

@@ -10,7 +10,7 @@ import dataclasses
 from dataclasses import dataclass
 from typing import Any
 
-from wmdist.config.fields import param
+from wmdist.config.fields import MAX_LAYERS, param
 
 # DreamerV3 (arXiv v1) model sizes: GRU units, MLP units, CNN depth, MLP layers.
 V3_SIZES: dict[str, tuple[int, int, int, int]] = {
@@ -61,7 +61,7 @@ class DreamerConfig:
     # --- world model -----------------------------------------------------------------
     deter: int | None = param(None, "GRU (deterministic state) width", ge=1)
     units: int | None = param(None, "hidden width of every MLP", ge=1)
-    mlp_layers: int | None = param(None, "hidden layers of encoder/decoder/heads/actor/critic MLPs", ge=1)
+    mlp_layers: int | None = param(None, "hidden layers of encoder/decoder/heads/actor/critic MLPs", ge=1, le=MAX_LAYERS)
     stoch: int | None = param(None, "stochastic state: Gaussian size (classes=0) or number of categoricals", ge=1)
     classes: int | None = param(None, "classes per categorical latent (0 = Gaussian latent, V1)", ge=0)
     cnn_depth: int | None = param(None, "channels of the first conv layer (64x64 images)", ge=1)

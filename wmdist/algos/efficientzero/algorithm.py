@@ -33,6 +33,7 @@ class EfficientZero(MuZero):
                              f"(set algo.value_prefix: false)")
 
     def check_run(self, run: Any) -> None:
+        super().check_run(run)
         self.config.check_run(run)
 
     def extra_fields(self) -> dict[str, FieldSpec]:

@@ -10,7 +10,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from wmdist.algos.muzero.config import MuZeroConfig
-from wmdist.config.fields import param
+from wmdist.config.fields import MAX_LAYERS, param
 
 
 @dataclass
@@ -19,7 +19,7 @@ class EfficientZeroConfig(MuZeroConfig):
     td_steps: int = param(5, "n of the n-step value target, before the off-policy correction (authors: 5)", ge=1)
     value_loss_weight: float = param(0.25, "weight of the value loss (authors: 0.25)", ge=0)
     conv_channels: int = param(64, "conv: channels of the residual towers (authors' Atari network: 64)", ge=2)
-    conv_blocks: int = param(1, "conv: residual blocks in each of h, g, f (authors: 1)", ge=0)
+    conv_blocks: int = param(1, "conv: residual blocks in each of h, g, f (authors: 1)", ge=0, le=MAX_LAYERS)
     conv_head_channels: int = param(16, "conv: channels of the 1x1 conv before each head (authors: 16)", ge=1)
     conv_downsample_blocks: list[int] = param(
         [1, 1, 1], "conv, atari stem: residual blocks in the three stages of the 96 -> 6 downsampling "

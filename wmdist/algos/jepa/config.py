@@ -3,7 +3,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from wmdist.config.fields import param, section
+from wmdist.config.fields import MAX_LAYERS, param, section
 from wmdist.search.cem import CEMConfig
 
 
@@ -23,7 +23,7 @@ class JepaConfig:
     history: int = param(1, "embeddings and actions the predictor sees (LeWM: 3; the point mass is Markov in one frame)",
                          ge=1)
     pred_hidden: int = param(256, "hidden width of the predictor MLP (LeWM: a 6-layer transformer)", ge=1)
-    pred_layers: int = param(2, "hidden layers of the predictor MLP", ge=1)
+    pred_layers: int = param(2, "hidden layers of the predictor MLP", ge=1, le=MAX_LAYERS)
     pred_dropout: float = param(0.0, "dropout after each hidden layer of the predictor while training (LeWM: 0.1); "
                                      "off when planning", ge=0, lt=1)
     act: str = param("silu", "activation", choices=("elu", "silu", "relu", "tanh"))

@@ -28,6 +28,13 @@ class MuZero(Algorithm):
     def validate(self) -> None:
         check_spec(self.spec, self.config)
 
+    def check_run(self, run) -> None:
+        # a sample unrolls K steps inside its stored window: with K >= seq_len no sample has its
+        # whole unroll in the data, and every step past the window trains on nothing
+        if self.config.unroll_steps >= run.replay.seq_len:
+            raise ValueError(f"algo.unroll_steps ({self.config.unroll_steps}) must be below replay.seq_len "
+                             f"({run.replay.seq_len}): each sample unrolls that many steps inside its window")
+
     def extra_fields(self) -> dict[str, FieldSpec]:
         a = self.spec.num_actions
         fields = {"search_policy": FieldSpec((a,), "float32"), "search_value": FieldSpec((), "float32")}

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from wmdist.config.fields import param, section
+from wmdist.config.fields import MAX_LAYERS, param, section
 from wmdist.nets.optim import OptimConfig
 from wmdist.search.api import SearchConfig
 
@@ -25,7 +25,7 @@ class MuZeroConfig:
     # typed elements: a bare `list` let [1.5] through (a width-1 net) and [[1]] crash validate()
     hidden: list[int] = param([64], "mlp: hidden layer widths of every function; conv: widths of the head MLPs", ge=1)
     conv_channels: int = param(256, "conv: channels of the residual towers (paper: 256)", ge=2)
-    conv_blocks: int = param(16, "conv: residual blocks in each of h, g, f (paper: 16)", ge=0)
+    conv_blocks: int = param(16, "conv: residual blocks in each of h, g, f (paper: 16)", ge=0, le=MAX_LAYERS)
     conv_head_channels: int = param(2, "conv: channels of the 1x1 conv before each head", ge=1)
     conv_stem: str = param("atari", "conv: representation input stage: atari = the paper's downsampling (96x96 -> 6x6); "
                                     "grid = one 3x3 conv at full resolution (small grids such as MinAtar's 10x10)",

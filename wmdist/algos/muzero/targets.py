@@ -103,7 +103,8 @@ def make_targets(
     m = np.minimum(td_steps, e[:, None] - pos)  # [B, K+1]
     partial = np.zeros((b, k1), np.float64)
     disc = np.ones((b, k1), np.float64)
-    for j in range(1, int(np.max(td_steps, initial=1)) + 1):
+    # m <= E - p <= T - 1: a td_steps past the window adds nothing (and 1e12 would never end)
+    for j in range(1, min(int(np.max(td_steps, initial=1)), t - 1) + 1):
         use = acting & (j <= m)
         r = reward_all[rows, np.clip(pos + j, 0, t - 1)]
         partial += np.where(use, disc * r, 0.0)

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from wmdist.config.fields import param, section
+from wmdist.config.fields import MAX_LAYERS, param, section
 from wmdist.nets.world_model import WorldModelSettings
 from wmdist.search.cem import CEMConfig
 
@@ -20,7 +20,8 @@ class PlaNetConfig:
     deter: int = param(200, "GRU (deterministic state) width (PlaNet: 200)", ge=1)
     stoch: int = param(30, "Gaussian stochastic state size (PlaNet: 30)", ge=1)
     units: int = param(200, "hidden width of every MLP (PlaNet: 200)", ge=1)
-    mlp_layers: int = param(2, "hidden layers of the vector encoder, the decoder and the reward head (PlaNet: 2)", ge=1)
+    mlp_layers: int = param(2, "hidden layers of the vector encoder, the decoder and the reward head (PlaNet: 2)", ge=1,
+                            le=MAX_LAYERS)
     cnn_depth: int = param(32, "channels of the first conv layer, 64x64 images (PlaNet: 32, a 1024-wide embedding)", ge=1)
     act: str = param("relu", "activation (PlaNet: ReLU)", choices=("elu", "silu", "relu", "tanh"))
     free_nats: float = param(3.0, "the batch-mean KL is clipped below at this many nats (PlaNet: 3)", ge=0)

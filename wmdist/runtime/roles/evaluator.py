@@ -9,7 +9,7 @@ import numpy as np
 from wmdist.algos.base import Policy
 from wmdist.config.schema import RunConfig
 from wmdist.envs.spec import EnvSpec
-from wmdist.runtime.roles.setup import build_algorithm, evaluation_config, process_tag, set_threads
+from wmdist.runtime.roles.setup import build_algorithm, device_for, evaluation_config, process_tag, set_threads
 from wmdist.runtime.roles.weights import pull
 
 
@@ -56,7 +56,7 @@ class EvaluatorRole:
         self.tag = process_tag()  # who answers (the driver counts restarts by it)
         self.cfg, self.broker = cfg, broker
         seed = cfg.run.seed + 99_991
-        self.policy = build_algorithm(evaluation_config(cfg), spec, seed).make_policy("cpu")
+        self.policy = build_algorithm(evaluation_config(cfg), spec, seed).make_policy(device_for(cfg.eval.gpus))
         self.board = None
         if spec.players == 2:
             # Greedy self-play measures nothing: play an opponent (the exact solver for
