@@ -374,3 +374,16 @@ def test_a_td_horizon_past_the_window_gives_the_same_targets_at_once():
     for name in ("value_partial", "boot_idx", "boot_disc", "boot_net", "value_w"):
         assert np.array_equal(getattr(at_window, name), getattr(past, name)), name
     assert (at_window.boot_idx >= 0).any() and (at_window.value_partial != 0).any()
+
+
+@pytest.mark.parametrize("override", ["algo=3", "algo=[1]"])
+def test_a_scalar_for_the_algo_section_is_one_line(override):
+    # `--set algo=3` raised a TypeError traceback from the loader
+    assert _one_line_error([override], MUZERO).startswith("algo: expected a mapping")
+
+
+def test_a_binary_config_file_is_named_in_one_line(tmp_path):
+    path = tmp_path / "photo.yaml"
+    path.write_bytes(b"run:\n  name: x\n\xb7\xff\x00")
+    msg = _one_line_error([], str(path))
+    assert msg.startswith(f"{path}: not a text file")

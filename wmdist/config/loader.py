@@ -49,6 +49,8 @@ def read_yaml_mapping(path: Path) -> dict:
         raise ConfigError(f"config file not found: {path}")
     try:
         data = parse_yaml(path.read_text()) or {}
+    except UnicodeDecodeError as err:
+        raise ConfigError(f"{path}: not a text file (byte {err.start} is not UTF-8)") from None
     except yaml.YAMLError as err:
         mark = getattr(err, "problem_mark", None)
         where = f" line {mark.line + 1}" if mark else ""
@@ -229,7 +231,10 @@ def config_from_tree(tree: dict, default_name: str = "run") -> RunConfig:
     tree = dict(tree)
     if "algo_name" in tree:
         raise ConfigError("unknown key 'algo_name' (did you mean 'algo.name'?)")
-    algo_tree = dict(tree.pop("algo", None) or {})
+    algo_tree = tree.pop("algo", None) or {}
+    if not isinstance(algo_tree, dict):
+        raise ConfigError(f"algo: expected a mapping of the algorithm's fields (e.g. algo: {{name: muzero}}), got {algo_tree!r}")
+    algo_tree = dict(algo_tree)
     name = algo_tree.pop("name", None)
     if not name:
         raise ConfigError("algo.name is missing (e.g. algo: {name: muzero})")
