@@ -135,25 +135,33 @@ def train(cfg: RunConfig | None = None, resume: str | None = None, overrides: li
     """Run training; returns the process exit status."""
     from wmdist.runtime import checkpoint as ck
     from wmdist.runtime import preflight as pf
+    from wmdist.runtime.run_lock import RunLock
 
-    cfg, spec, fields, ckpt, state, hub = _prepare(cfg, resume, overrides)
+    # a run directory another driver is using is refused before its files are read
+    lock = RunLock(resume).acquire() if resume and Path(resume).is_dir() else None
     try:
-        run_dir = Path(resume) if resume else pf.make_run_dir(cfg)
-    except BaseException:
-        if hub is not None:
-            hub.close()
-        raise
-    # a resume rewrites config.yaml only now, after its checkpoint loaded into this config's model
-    (run_dir / CONFIG_FILE).write_text(dump_yaml(cfg))
-    ck.clean_partial(run_dir)
-    handler = _file_log(run_dir)
-    log.info("start%s: %s", f" (resume from {ckpt.name})" if ckpt else "", " ".join(sys.argv))
-    print(f"wmdist: run directory {run_dir}", file=out, flush=True)
-    try:
-        return _run(cfg, spec, fields, run_dir, ckpt, state, hub, out)
+        cfg, spec, fields, ckpt, state, hub = _prepare(cfg, resume, overrides)
+        try:
+            run_dir = Path(resume) if resume else pf.make_run_dir(cfg)
+            lock = lock or RunLock(run_dir).acquire()
+        except BaseException:
+            if hub is not None:
+                hub.close()
+            raise
+        # a resume rewrites config.yaml only now, after its checkpoint loaded into this config's model
+        (run_dir / CONFIG_FILE).write_text(dump_yaml(cfg))
+        ck.clean_partial(run_dir)
+        handler = _file_log(run_dir)
+        log.info("start%s: %s", f" (resume from {ckpt.name})" if ckpt else "", " ".join(sys.argv))
+        print(f"wmdist: run directory {run_dir}", file=out, flush=True)
+        try:
+            return _run(cfg, spec, fields, run_dir, ckpt, state, hub, out)
+        finally:
+            log.removeHandler(handler)
+            handler.close()
     finally:
-        log.removeHandler(handler)
-        handler.close()
+        if lock is not None:
+            lock.release()
 
 
 def _run(cfg: RunConfig, spec, fields: dict, run_dir: Path, ckpt: Path | None, state: dict | None, hub,
