@@ -92,7 +92,9 @@ def _parser() -> argparse.ArgumentParser:
     d.add_argument("--rollouts", type=_positive_int, default=64, help="--check: dream rollouts per policy")
     d.add_argument("--episodes", type=_positive_int, default=5, help="--check: real episodes per policy")
 
-    b = sub.add_parser("bench", help="run a benchmark (mcts, replay, selfplay, dreamer, envs, planner, all; soak by name)",
+    from wmdist.bench.runner import BENCHES, LONG
+
+    b = sub.add_parser("bench", help=f"run a benchmark ({', '.join(BENCHES)}, all; {', '.join(LONG)} by name)",
                        description="Each measured case prints one JSON object per line with --json.")
     b.add_argument("name")
     b.add_argument("--json", action="store_true", help="one JSON object per line (default: a table)")
