@@ -27,3 +27,14 @@ def ray_session():
         )
     yield ray
     ray.shutdown()
+
+
+@pytest.fixture
+def nothing_starts(monkeypatch):
+    """`wmdist train` with its run replaced by a failure: a pre-start check must stop it first."""
+    from wmdist.runtime import train as train_mod
+
+    def started(*args, **kwargs):
+        raise AssertionError("the run started: the check did not stop it first")
+
+    monkeypatch.setattr(train_mod, "_run", started)

@@ -325,16 +325,6 @@ def test_min_size_up_to_the_capacity_passes():
 # --- values the pre-start checks used to let through (session 33) ------------------------
 
 
-@pytest.fixture
-def nothing_starts(monkeypatch):
-    from wmdist.runtime import train as train_mod
-
-    def started(*args, **kwargs):
-        raise AssertionError("the run started: the check did not stop it first")
-
-    monkeypatch.setattr(train_mod, "_run", started)
-
-
 @pytest.mark.parametrize("sets, message", [
     (["algo.unroll_steps=60"], "algo.unroll_steps (60) must be below replay.seq_len (60)"),
     (["ray.num_gpus=2"], "ray.num_gpus=2, but torch sees 0"),

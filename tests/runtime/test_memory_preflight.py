@@ -13,7 +13,6 @@ from wmdist.algos.base import FieldSpec
 from tests.runtime.one_line import one_line_exit_2
 from wmdist.config.errors import ConfigError
 from wmdist.config.loader import load_config
-from wmdist.runtime import train as train_mod
 from wmdist.runtime.preflight_memory import check_memory, node_memory_bytes, step_bytes
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -21,12 +20,6 @@ MUZERO = str(ROOT / "configs" / "muzero_cartpole.yaml")
 GiB = 1 << 30
 
 
-@pytest.fixture
-def nothing_starts(monkeypatch):
-    def started(*args, **kwargs):
-        raise AssertionError("the run started: the check did not stop it first")
-
-    monkeypatch.setattr(train_mod, "_run", started)
 
 
 def _one_line_exit_2(capsys, argv: list[str]) -> str:

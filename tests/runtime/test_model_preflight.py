@@ -14,7 +14,6 @@ from tests.runtime.one_line import one_line_exit_2
 from wmdist.config.errors import ConfigError
 from wmdist.config.loader import load_config
 from wmdist.runtime import preflight as pf
-from wmdist.runtime import train as train_mod
 from wmdist.runtime.preflight_memory import node_memory_bytes
 from wmdist.runtime.preflight_model import check_model, measure, model_size, policy_copies
 
@@ -27,12 +26,6 @@ def _algo(path: Path | str, sets: list[str] | None = None):
     return cfg, pf.check_env_and_algo(cfg)[1]
 
 
-@pytest.fixture
-def nothing_starts(monkeypatch):
-    def started(*args, **kwargs):
-        raise AssertionError("the run started: the check did not stop it first")
-
-    monkeypatch.setattr(train_mod, "_run", started)
 
 
 def test_every_preset_is_measured_on_the_meta_device_and_fits_here():
