@@ -9,7 +9,7 @@ from typing import IO
 from wmdist.config.errors import ConfigError, closest
 
 BENCHES = ("mcts", "replay", "selfplay", "dreamer", "envs", "planner", "cmaes", "goal_planner", "reanalyze")
-LONG = ("soak",)  # run by name only: not part of `all`
+LONG = ("soak", "compile")  # run by name only: not part of `all` (minutes each)
 
 
 def run_bench(name: str, as_json: bool = False, quick: bool = False, out: IO[str] = sys.stdout) -> int:
