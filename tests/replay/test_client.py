@@ -94,7 +94,8 @@ def test_held_counts_are_sent_before_anything_reads_or_waits_on_them(started, ba
 
 
 def test_close_unblocks_waiters_and_checkpoint_round_trip(started, tmp_path):
-    c = started(_cfg(shards=1, min_size=10**6, sampler="prioritized"))
+    # min_size at the whole capacity: the 9 sequences inserted below never let the waiter sample
+    c = started(_cfg(shards=1, min_size=64 * T, sampler="prioritized"))
     out = []
     th = threading.Thread(target=lambda: out.append(c.sample(4, timeout=None)))
     th.start()
@@ -104,7 +105,7 @@ def test_close_unblocks_waiters_and_checkpoint_round_trip(started, tmp_path):
     c.save(str(tmp_path / "ckpt"))
     time.sleep(0.2)
     assert th.is_alive()
-    c2 = started(_cfg(shards=1, min_size=10**6, sampler="prioritized"), name="t2")
+    c2 = started(_cfg(shards=1, min_size=64 * T, sampler="prioritized"), name="t2")
     c2.restore(str(tmp_path / "ckpt"))
     a, b = c.stats(), c2.stats()
     for k in ("size_sequences", "size_steps", "inserts", "shard0_size_sequences", "limiter_size_steps"):

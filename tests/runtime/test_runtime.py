@@ -58,8 +58,9 @@ def test_full_topology_versions_reach_collectors_and_actions_follow_weights(ray_
     from wmdist.telemetry.publish import Telemetry
 
     ray = ray_session
+    # 80 updates end it; the minutes are a backstop (fake.yaml's 0.5 ended a loaded CI run at 7 updates)
     topo = _topology(tmp_path, "reanalyze.num=1", "eval.every_seconds=1", "run.max_updates=80", "replay.shards=2",
-                     "metrics.enabled=true")
+                     "metrics.enabled=true", "run.max_minutes=3")
     tele = Telemetry(topo.cfg, topo.run_dir, open(os.devnull, "w"))
     try:
         driver = _EveryRoleDriver(topo, Counters(), on_tick=tele.update)
