@@ -377,3 +377,20 @@ def test_a_binary_config_file_is_named_in_one_line(tmp_path):
     path.write_bytes(b"run:\n  name: x\n\xb7\xff\x00")
     msg = _one_line_error([], str(path))
     assert msg.startswith(f"{path}: not a text file")
+
+
+CONFIGS = Path(__file__).parents[2] / "configs"
+
+
+@pytest.mark.parametrize("preset, override", [
+    ("muzero_cartpole", "algo.search.num_simulations=1000000000"),   # the tree is sized by it: an allocation after start
+    ("muzero_cartpole", "eval.num_simulations=1000000000"),
+    ("dreamerv3_cartpole", "algo.horizon=1000000000000"),             # an imagination that never ends
+    ("planet_dmc_cartpole_swingup", "algo.planner.candidates=1000000000000"),
+    ("planet_dmc_cartpole_swingup", "algo.planner.horizon=1000000000"),
+    ("worldmodels_carracing", "algo.popsize=1000000000"),
+    ("dreamerv3_cartpole", "algo.mlp_layers=1000000"),
+])
+def test_per_decision_work_and_depth_past_any_paper_are_refused(preset, override):
+    key = override.split("=")[0]
+    assert _one_line_error([override], str(CONFIGS / f"{preset}.yaml")).startswith(f"{key}: ")

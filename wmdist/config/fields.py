@@ -11,6 +11,10 @@ from typing import Any, Sequence
 # The most layers or blocks a network-depth field accepts: far past any paper's model (MuZero:
 # 16 residual blocks), low enough that a typo such as 1e12 is refused instead of building forever.
 MAX_LAYERS = 1000
+# The same guard for the work of one decision (search simulations, CEM candidates, CMA-ES population and
+# rollouts; MuZero's board games: 800) and for horizons and refit counts (Dreamer: 15, PlaNet: 12).
+MAX_PER_DECISION = 100_000
+MAX_HORIZON = 10_000
 
 
 def param(

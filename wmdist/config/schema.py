@@ -9,7 +9,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-from wmdist.config.fields import param, section
+from wmdist.config.fields import MAX_PER_DECISION, param, section
 from wmdist.envs.config import EnvConfig
 from wmdist.replay.config import ReplayConfig
 
@@ -76,7 +76,7 @@ class EvalConfig:
     cpus: float = param(0.25, "Ray CPUs for the evaluator", gt=0)
     opponent_rollouts: int = param(200, "board:connect4: random rollouts per move of the MCTS (UCT) opponent", ge=1)
     num_simulations: int = param(0, "MuZero family: search simulations per evaluation move (0 = algo.search's own); "
-                                    "more search at test time than in self-play", ge=0)
+                                    "more search at test time than in self-play", ge=0, le=MAX_PER_DECISION)
     judge_lines: bool = param(True, "board:tictactoe: also play the greedy agent against every opponent line and "
                                     "log the lines it loses (eval_lost_lines)")
     gpus: float = param(0.0, "Ray GPUs for the evaluator", ge=0)

@@ -43,7 +43,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-from wmdist.config.fields import param
+from wmdist.config.fields import MAX_PER_DECISION, param
 
 Latents = Any  # np.ndarray | torch.Tensor | nested tuple/list of them, leading dim B
 RecurrentFn = Callable[..., tuple[np.ndarray, np.ndarray, np.ndarray, Latents]]
@@ -53,7 +53,8 @@ RecurrentFn = Callable[..., tuple[np.ndarray, np.ndarray, np.ndarray, Latents]]
 class SearchConfig:
     """Hyperparameters of one search (defaults: MuZero Atari, docs/reference.md)."""
 
-    num_simulations: int = param(50, "simulations per search (one recurrent_fn call each)", ge=1)
+    num_simulations: int = param(50, "simulations per search (one recurrent_fn call each)", ge=1,
+                                 le=MAX_PER_DECISION)
     c1: float = param(1.25, "pUCT exploration constant c1 (MuZero eq. 2)", gt=0)
     c2: float = param(19652.0, "pUCT visit-scaling constant c2 (MuZero eq. 2)", gt=0)
     discount: float = param(0.997, "discount gamma used in the backup G = r + gamma * G", ge=0, le=1)

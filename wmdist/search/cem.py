@@ -19,7 +19,7 @@ from typing import Callable
 
 import torch
 
-from wmdist.config.fields import param
+from wmdist.config.fields import MAX_HORIZON, MAX_PER_DECISION, param
 
 ScoreFn = Callable[[torch.Tensor], torch.Tensor]  # actions [E, J, H, A] -> scores [E, J], higher is better
 
@@ -28,10 +28,10 @@ ScoreFn = Callable[[torch.Tensor], torch.Tensor]  # actions [E, J, H, A] -> scor
 class CEMConfig:
     """One CEM planning call (defaults: PlaNet's planner, docs/reference.md)."""
 
-    horizon: int = param(12, "planning horizon H (steps of each candidate action sequence)", ge=1)
-    candidates: int = param(1000, "candidate action sequences J drawn per iteration", ge=1)
+    horizon: int = param(12, "planning horizon H (steps of each candidate action sequence)", ge=1, le=MAX_HORIZON)
+    candidates: int = param(1000, "candidate action sequences J drawn per iteration", ge=1, le=MAX_PER_DECISION)
     top_k: int = param(100, "best candidates K the Gaussian is refit to", ge=1)
-    iterations: int = param(10, "refits I per decision", ge=1)
+    iterations: int = param(10, "refits I per decision", ge=1, le=MAX_HORIZON)
     init_std: float = param(1.0, "std of the initial Gaussian, in model action units ([-1, 1] bounds)", gt=0)
     warm_start: bool = param(False, "start from the previous decision's plan shifted by one step (PlaNet: a fresh N(0, 1))")
 

@@ -10,7 +10,7 @@ import dataclasses
 from dataclasses import dataclass
 from typing import Any
 
-from wmdist.config.fields import MAX_LAYERS, param
+from wmdist.config.fields import MAX_HORIZON, MAX_LAYERS, param
 
 # DreamerV3 (arXiv v1) model sizes: GRU units, MLP units, CNN depth, MLP layers.
 V3_SIZES: dict[str, tuple[int, int, int, int]] = {
@@ -85,7 +85,7 @@ class DreamerConfig:
     reward_scale: float = param(1.0, "reward loss scale", ge=0)
     cont_scale: float = param(1.0, "continue loss scale", ge=0)
     # --- behaviour -------------------------------------------------------------------
-    horizon: int = param(15, "imagination horizon H", ge=1)
+    horizon: int = param(15, "imagination horizon H", ge=1, le=MAX_HORIZON)
     imag_starts: int = param(0, "imagine from at most this many posterior states, drawn at random from the batch (0 = all, as the papers)", ge=0)
     discount: float | None = param(None, "discount gamma (V3: 1 - 1/333)", gt=0, le=1)
     lam: float = param(0.95, "lambda of the lambda-returns", ge=0, le=1)

@@ -5,7 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from wmdist.algos.worldmodels.cmaes import MIN_POPSIZE
-from wmdist.config.fields import param
+from wmdist.config.fields import MAX_PER_DECISION, param
 
 
 @dataclass
@@ -37,8 +37,10 @@ class WorldModelsConfig:
     controller_h: bool = param(True, "C reads M's hidden state: a = W [z, h] + b (paper). false: a = W z + b, the "
                                      "paper's 'V model only' ablation (CarRacing 632 +- 251 against 906 +- 21), "
                                      "with 99 instead of 867 weights for CMA-ES to search")
-    popsize: int = param(64, f"CMA-ES population (paper: 64; cma needs >= {MIN_POPSIZE})")
-    rollouts: int = param(16, "rollouts per candidate, its fitness is their mean (paper: 16)", ge=1)
+    popsize: int = param(64, f"CMA-ES population (paper: 64; cma needs >= {MIN_POPSIZE})",
+                         le=MAX_PER_DECISION)
+    rollouts: int = param(16, "rollouts per candidate, its fitness is their mean (paper: 16)", ge=1,
+                          le=MAX_PER_DECISION)
     sigma0: float = param(0.1, "CMA-ES initial step size (authors' code: 0.1)", gt=0)
     generations: int = param(0, "stage 3: CMA-ES generations (0 = until the run ends)", ge=0)
     train_in: str = param("dream", "where candidates are scored: dream (M at temperature tau) or real (the env)",
