@@ -186,3 +186,25 @@ def test_half_written_checkpoints_are_cleaned_up(tmp_path):
     assert not stale.exists()
     stale.mkdir()
     assert clean_partial(tmp_path) == 1 and not stale.exists()
+
+
+def test_a_checkpoint_rewritten_at_the_same_counters_is_replaced_whole(tmp_path, monkeypatch):
+    # it used to be deleted in place before the new one was renamed in: a reader (eval, a test
+    # polling for checkpoints) could find the folder without its counters.json
+    import shutil
+
+    from wmdist.runtime import checkpoint as ck
+
+    w = {"w": np.zeros((2, 2), np.float32)}
+    first = save_checkpoint(tmp_path, {"w": w["w"]}, w, 1, {"updates": 0, "env_steps": 0}, None, keep=2)
+    seen, real_rmtree = [], shutil.rmtree
+
+    def rmtree(path, *args, **kwargs):  # after anything is deleted, the checkpoint is there, whole
+        real_rmtree(path, *args, **kwargs)
+        seen.append((first / "counters.json").exists())
+
+    monkeypatch.setattr(ck.shutil, "rmtree", rmtree)
+    again = save_checkpoint(tmp_path, {"w": w["w"]}, w, 7, {"updates": 0, "env_steps": 0}, None, keep=2)
+    assert again == first and ck.load_counters(first)["version"] == 7
+    assert seen and all(seen)
+    assert [p.name for p in (tmp_path / CKPT_DIR).iterdir()] == [first.name]  # nothing set aside is left

@@ -207,8 +207,9 @@ class WorldModelsLearner(Learner):
             reseeds = np.random.default_rng([self.seed, g, 1]).integers(0, 2**31 - 1, size=c.reeval_rollouts)  # [R']
             f = self.pick.offer(lambda x: pool.evaluate(x, reseeds, self.model_id, self.model_payload, c.train_in),
                                 {"mean": self.cma.mean, "best": candidates[int(np.argmax(fitness))]})
-            out.update({"reeval_mean": float(f[0]), "reeval_gen_best": float(f[1]), "pick_fitness": self.pick.f,
-                        "pick_is_mean": float(self.pick.source == "mean")})
+            out.update({"reeval_mean": float(f[0]), "reeval_gen_best": float(f[1])})
+        if self.pick.has:  # every generation, not only re-scoring ones: the driver logs only its tick's last update
+            out.update({"pick_fitness": self.pick.f, "pick_is_mean": float(self.pick.source == "mean")})
         out["generation_seconds"] = time.monotonic() - t0
         out["headline_fitness"] = self._published_fitness()
         return out
