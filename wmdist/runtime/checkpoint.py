@@ -48,14 +48,14 @@ def save_checkpoint(run_dir: str | Path, learner_state: dict, weights: dict[str,
     (tmp / "counters.json").write_text(json.dumps({**counters, "version": int(version)}, indent=1))
     if replay is not None:
         replay.save(str(tmp / "replay"))
-    old = root / f".{name}.old.tmp"  # a checkpoint of the same counters (rewritten at the end of a run)
+    aside = root / f".{name}.old.tmp"  # a checkpoint of the same counters (rewritten at the end of a run)
     if final.exists():
         # moved aside in one rename, never deleted in place: a reader (`wmdist eval`, a resume)
         # that found `final` must not see it half-removed
-        shutil.rmtree(old, ignore_errors=True)
-        final.rename(old)
+        shutil.rmtree(aside, ignore_errors=True)
+        final.rename(aside)
     tmp.rename(final)
-    shutil.rmtree(old, ignore_errors=True)
+    shutil.rmtree(aside, ignore_errors=True)
     for old in list_checkpoints(run_dir)[:-keep]:
         shutil.rmtree(old, ignore_errors=True)
     return final

@@ -62,15 +62,17 @@ def check_resources(cfg: RunConfig) -> None:
         return  # no Ray: every role shares this process
     if cfg.ray.address:
         return  # a cluster's size is known only once joined (checked in topology.build)
-    if cfg.ray.num_gpus > 0 and cfg.ray.num_gpus > _detected_gpus():
+    detected = _detected_gpus()
+    if cfg.ray.num_gpus > detected:
         # Ray would schedule GPU roles on devices that do not exist; they would then run on the CPU
-        raise ConfigError(f"ray.num_gpus={cfg.ray.num_gpus}, but torch sees {_detected_gpus()} CUDA device(s) on this "
+        raise ConfigError(f"ray.num_gpus={cfg.ray.num_gpus}, but torch sees {detected} CUDA device(s) on this "
                           f"machine; leave ray.num_gpus at -1 to detect them")
     memory = node_memory_bytes()
     if memory and cfg.ray.object_store_mb * 2**20 > memory:
         raise ConfigError(f"ray.object_store_mb={cfg.ray.object_store_mb} is more than this machine's memory "
                           f"({memory / 2**20:,.0f} MB); the object store lives in it")
-    cluster = {"CPU": float(cfg.ray.num_cpus or os.cpu_count() or 1), "GPU": float(_gpus(cfg))}
+    gpus = cfg.ray.num_gpus if cfg.ray.num_gpus >= 0 else detected
+    cluster = {"CPU": float(cfg.ray.num_cpus or os.cpu_count() or 1), "GPU": float(gpus)}
     check_fits(cfg, cluster)
 
 
@@ -102,10 +104,6 @@ def _detected_gpus() -> int:
     import torch
 
     return torch.cuda.device_count() if torch.cuda.is_available() else 0
-
-
-def _gpus(cfg: RunConfig) -> int:
-    return cfg.ray.num_gpus if cfg.ray.num_gpus >= 0 else _detected_gpus()
 
 
 def check_replay_store(cfg: RunConfig) -> None:

@@ -8,7 +8,6 @@ from typing import Any, Mapping
 import numpy as np
 import torch
 
-from wmdist.nets.generator import seeded_generator
 from wmdist.algos.base import Batch, Learner, NonFiniteLoss, UpdateResult, Weights
 from wmdist.algos.dreamer.config import DreamerConfig
 from wmdist.algos.dreamer.imagine import ActorCriticLoss, Start
@@ -21,6 +20,7 @@ from wmdist.envs.spec import EnvSpec
 from wmdist.nets.dists import bernoulli_nll, twohot_bins, twohot_loss
 from wmdist.nets.optim import GuardedStep, OptimConfig, lr_at
 from wmdist.nets.world_model import load_world_model, world_model_weights
+from wmdist.nets.generator import seeded_generator
 
 
 def policy_weights(wm: WorldModel, ac: ActorCritic) -> Weights:

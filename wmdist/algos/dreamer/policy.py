@@ -5,13 +5,13 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from wmdist.nets.generator import seeded_generator
 from wmdist.algos.base import Weights
 from wmdist.algos.filtering import FilteringPolicy
 from wmdist.algos.dreamer.config import DreamerConfig
 from wmdist.algos.dreamer.learner import load_policy_weights
 from wmdist.algos.dreamer.nets import ActorCritic, WorldModel, action_to_env
 from wmdist.envs.spec import EnvSpec
+from wmdist.nets.generator import seeded_generator
 
 
 class DreamerPolicy(FilteringPolicy):

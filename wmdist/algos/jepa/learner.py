@@ -14,7 +14,6 @@ from typing import Any, Mapping
 import numpy as np
 import torch
 
-from wmdist.nets.generator import seeded_generator
 from wmdist.algos.base import Batch, Learner, NonFiniteLoss, UpdateResult, Weights
 from wmdist.algos.jepa.config import JepaConfig
 from wmdist.algos.jepa.model import FRAME_CHANNELS, JepaModel, model_weights, recalibrate_batchnorm
@@ -22,6 +21,7 @@ from wmdist.algos.jepa.sigreg import effective_rank, random_directions, sigreg
 from wmdist.envs.spec import EnvSpec
 from wmdist.nets.actions import action_to_model
 from wmdist.nets.optim import GuardedStep, OptimConfig
+from wmdist.nets.generator import seeded_generator
 
 FIELDS = ("obs", "action", "mask")
 

@@ -11,7 +11,6 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from wmdist.nets.generator import seeded_generator
 from wmdist.algos.base import Policy, Weights
 from wmdist.algos.jepa.config import JepaConfig
 from wmdist.algos.jepa.model import JepaModel, load_model
@@ -19,6 +18,7 @@ from wmdist.algos.jepa.planning import goal_distance_fn
 from wmdist.envs.spec import EnvSpec
 from wmdist.nets.actions import action_to_env
 from wmdist.search.cem import cem_plan, shift_plan
+from wmdist.nets.generator import seeded_generator
 
 OBS_SHAPE = (64, 64, 6)  # the current frame and the goal image, 3 channels each
 

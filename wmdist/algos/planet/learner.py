@@ -12,7 +12,6 @@ from typing import Any, Mapping
 import numpy as np
 import torch
 
-from wmdist.nets.generator import seeded_generator
 from wmdist.algos.base import Batch, Learner, NonFiniteLoss, UpdateResult, Weights
 from wmdist.algos.dreamer.precision import PhasePrecision
 from wmdist.algos.planet.config import PlaNetConfig
@@ -22,6 +21,7 @@ from wmdist.nets.actions import action_to_model
 from wmdist.nets.kl import masked_mean
 from wmdist.nets.optim import GuardedStep, OptimConfig
 from wmdist.nets.world_model import WorldModel, world_model_weights
+from wmdist.nets.generator import seeded_generator
 
 FIELDS = ("obs", "action", "reward", "first", "mask")
 

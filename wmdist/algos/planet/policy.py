@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import torch
 
-from wmdist.nets.generator import seeded_generator
 from wmdist.algos.base import Weights
 from wmdist.algos.filtering import FilteringPolicy
 from wmdist.algos.planet.config import PlaNetConfig
@@ -21,6 +20,7 @@ from wmdist.envs.spec import EnvSpec
 from wmdist.nets.actions import action_to_env
 from wmdist.nets.world_model import WorldModel, load_world_model
 from wmdist.search.cem import cem_plan, shift_plan
+from wmdist.nets.generator import seeded_generator
 
 
 class PlaNetPolicy(FilteringPolicy):

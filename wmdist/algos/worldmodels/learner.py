@@ -20,7 +20,6 @@ from typing import Any, Mapping
 import numpy as np
 import torch
 
-from wmdist.nets.generator import seeded_generator
 from wmdist.algos.base import Batch, Learner, NonFiniteLoss, UpdateResult, Weights
 from wmdist.algos.worldmodels.cmaes import CMAES
 from wmdist.algos.worldmodels.config import WorldModelsConfig
@@ -34,6 +33,7 @@ from wmdist.algos.worldmodels.vae import ConvVAE, vae_loss, vae_terms
 from wmdist.envs.spec import EnvSpec
 from wmdist.nets.actions import action_to_model
 from wmdist.nets.optim import GuardedStep, OptimConfig
+from wmdist.nets.generator import seeded_generator
 
 POOL_ROLE = "wm_eval"
 STAGE_VAE, STAGE_RNN, STAGE_CMA, STAGE_DONE = 0, 1, 2, 3
