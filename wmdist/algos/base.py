@@ -188,6 +188,12 @@ class Algorithm(ABC):
         this algorithm's config, e.g. it needs reanalyzers and `reanalyze.num` is 0. Called
         before anything starts."""
 
+    def host_memory(self) -> tuple[int, str]:
+        """(bytes, what): memory the learner allocates outside torch as it is built, named by the
+        config fields that size it. The model-size check refuses it before building (it cannot be
+        measured on torch's meta device). (0, "") for none."""
+        return 0, ""
+
     @abstractmethod
     def extra_fields(self) -> dict[str, FieldSpec]:
         """Per-step fields beyond obs/action/reward/first/last/terminal that replay stores

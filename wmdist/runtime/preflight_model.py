@@ -92,6 +92,9 @@ def check_model(cfg: Any, algo: Any, memory: int | None = None) -> None:
     memory = node_memory_bytes() if memory is None else memory
     if not memory:
         return
+    host, what = algo.host_memory()  # allocated for real while the learner is built: refused first
+    if host > memory:
+        raise ConfigError(f"{what} needs {format_bytes(host)}, more than this machine's memory ({format_bytes(memory)})")
     try:
         learner, policy = measure(algo)
     except RuntimeError as err:
@@ -102,7 +105,7 @@ def check_model(cfg: Any, algo: Any, memory: int | None = None) -> None:
     except Exception:  # noqa: BLE001 - as above
         return
     copies = policy_copies(cfg)
-    need = learner.bytes_held + copies * policy.bytes_held
+    need = host + learner.bytes_held + copies * policy.bytes_held
     if need > memory:
         raise ConfigError(
             f"the model this config builds has {learner.params:,} parameters: the learner's weights, gradients and "

@@ -44,21 +44,15 @@ class WorldModels(Algorithm):
         s = self.spec
         if s.obs_kind != "image" or len(s.obs_shape) != 3 or tuple(s.obs_shape[:2]) != (64, 64):
             raise ValueError(f"World Models' VAE needs 64x64 image observations, {s.id} gives {s.obs_shape}")
-        self._check_search_fits()
 
-    def _check_search_fits(self) -> None:
-        """A controller whose CMA-ES covariance cannot fit in memory is refused before it is built
-        (`algo.z_dim=1e8` otherwise spent a minute allocating before failing)."""
+    def host_memory(self) -> tuple[int, str]:
+        """CMA-ES's full covariance over the controller (`algo.z_dim=1e8` spent a minute allocating it)."""
         from wmdist.algos.worldmodels.cmaes import covariance_bytes
         from wmdist.algos.worldmodels.controller import num_params
-        from wmdist.runtime.preflight_memory import format_bytes, node_memory_bytes
 
-        cfg, memory = self.cfg, node_memory_bytes()
-        n = num_params(self.spec, cfg.z_dim, cfg.rnn_hidden, cfg.controller_h)
-        if memory and covariance_bytes(n) > memory:
-            raise ValueError(f"algo.z_dim / algo.rnn_hidden: the controller has {n:,} parameters, and CMA-ES's full "
-                             f"covariance over them needs {format_bytes(covariance_bytes(n))}, more than this "
-                             f"machine's memory ({format_bytes(memory)})")
+        n = num_params(self.spec, self.cfg.z_dim, self.cfg.rnn_hidden, self.cfg.controller_h)
+        return covariance_bytes(n), (f"algo.z_dim / algo.rnn_hidden: CMA-ES's full covariance over the "
+                                     f"controller's {n:,} parameters")
 
     def extra_fields(self) -> dict[str, FieldSpec]:
         return {}
