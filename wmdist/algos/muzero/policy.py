@@ -2,13 +2,11 @@
 from __future__ import annotations
 
 import numpy as np
-import torch
 
-from wmdist.algos.base import Policy, Weights
-from wmdist.algos.muzero.build import load_numpy_weights
+from wmdist.algos.base import Policy
 from wmdist.algos.muzero.config import MuZeroConfig
 from wmdist.algos.muzero.networks import MuZeroNet
-from wmdist.algos.muzero.searcher import Searcher
+from wmdist.algos.muzero.searching import SearchingRole
 from wmdist.envs.spec import EnvSpec
 
 
@@ -32,25 +30,13 @@ def select_actions(counts: np.ndarray, temperatures: np.ndarray, rng: np.random.
     return actions.astype(np.int64)
 
 
-class MuZeroPolicy(Policy):
+class MuZeroPolicy(SearchingRole, Policy):
     def __init__(self, net: MuZeroNet, cfg: MuZeroConfig, spec: EnvSpec, seed: int, device: str = "cpu") -> None:
-        self.cfg, self.spec = cfg, spec
-        self.device = torch.device(device)
-        self.net = net.to(self.device).eval()
-        self.two_player = spec.players == 2
-        self.searcher = Searcher(self.net, cfg.search, cfg.value_support, cfg.reward_support,
-                                 self.two_player, self.device)
-        self.rng = np.random.default_rng(seed)
+        self._init_search(net, cfg, spec, seed, device)
         self.env_steps = 0
-        self.version = -1
         self.moves: np.ndarray | None = None  # [E] moves played in each env's current episode
         self.last_net_seconds = 0.0
         self.last_search_seconds = 0.0
-
-    def set_weights(self, weights: Weights, version: int) -> None:
-        load_numpy_weights(self.net, weights)
-        self.net.eval()
-        self.version = version
 
     def set_progress(self, env_steps: int, updates: int) -> None:
         self.env_steps = int(env_steps)

@@ -3,13 +3,11 @@ stored step of the sampled sequences and return fresh policy and value targets."
 from __future__ import annotations
 
 import numpy as np
-import torch
 
-from wmdist.algos.base import Batch, Reanalyzer, Weights
-from wmdist.algos.muzero.build import load_numpy_weights
+from wmdist.algos.base import Batch, Reanalyzer
 from wmdist.algos.muzero.config import MuZeroConfig
 from wmdist.algos.muzero.networks import MuZeroNet
-from wmdist.algos.muzero.searcher import Searcher
+from wmdist.algos.muzero.searching import SearchingRole
 from wmdist.algos.muzero.targets import acting_steps
 from wmdist.envs.spec import EnvSpec
 
@@ -20,24 +18,12 @@ from wmdist.envs.spec import EnvSpec
 ROOT_BUCKET = 64
 
 
-class MuZeroReanalyzer(Reanalyzer):
+class MuZeroReanalyzer(SearchingRole, Reanalyzer):
     def __init__(self, net: MuZeroNet, cfg: MuZeroConfig, spec: EnvSpec, seed: int, device: str = "cpu",
                  max_roots: int = 256) -> None:
-        self.cfg, self.spec = cfg, spec
-        self.device = torch.device(device)
-        self.net = net.to(self.device).eval()
-        self.two_player = spec.players == 2
-        self.searcher = Searcher(self.net, cfg.search, cfg.value_support, cfg.reward_support,
-                                 self.two_player, self.device)
-        self.rng = np.random.default_rng(seed)
+        self._init_search(net, cfg, spec, seed, device)
         self.max_roots = max_roots  # roots per search call (bounds the tree's memory)
         self.root_bucket = ROOT_BUCKET  # search batches padded to a multiple of this (1: unpadded)
-        self.version = -1
-
-    def set_weights(self, weights: Weights, version: int) -> None:
-        load_numpy_weights(self.net, weights)
-        self.net.eval()
-        self.version = version
 
     def search_at(self, batch: Batch, r: np.ndarray, c: np.ndarray, add_noise: bool) -> tuple[np.ndarray, np.ndarray]:
         """Search the stored observations at rows r, steps c ([N] each) -> (policy targets
