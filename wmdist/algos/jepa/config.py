@@ -32,6 +32,12 @@ class JepaConfig:
     sigreg_projections: int = param(256, "random unit directions M drawn afresh every update (LeWM: 1024)", ge=1)
     sigreg_knots: int = param(17, "trapezoid knots K of the Epps-Pulley integral (LeWM: 17)", ge=2)
     sigreg_t_max: float = param(3.0, "upper end of the integral over t (LeWM: 3)", gt=0)
+    sigreg_head: int = param(0, "hidden width of a BatchNorm MLP head that SIGReg tests instead of the embedding "
+                                "itself (LeJEPA: regularise a projector, use the features below it), so the "
+                                "embedding planning compares need not become an isotropic Gaussian; 0 = SIGReg on "
+                                "the embedding (LeWM). nav:tworooms seeds 0-2: 47/77/43% of 100 goals against "
+                                "76/51/49% on the embedding (BENCHMARKS.md)", ge=0)
+    sigreg_head_dim: int = param(16, "output width of that head (the dimension of SIGReg's Gaussian)", ge=1)
     # --- optimisation -----------------------------------------------------------------
     lr: float = param(3e-4, "Adam learning rate", gt=0)
     grad_clip: float = param(100.0, "gradient norm clip (0 = none)", ge=0)

@@ -2,7 +2,8 @@
 
     L = MSE(pred(z_{t-h+1..t}, a_{t-h+1..t}), z_{t+1}) + lambda * SIGReg(z)
 
-with z = projector(encoder(frame)) for every real step of the batch. Both sides of the MSE
+with z = projector(encoder(frame)) for every real step of the batch (or SIGReg(head(z)) with
+`sigreg_head`, LeJEPA's arrangement: the head is regularised, z is what planning compares). Both sides of the MSE
 carry gradients: there is no stop-gradient and no EMA target; SIGReg alone keeps the
 embeddings from collapsing (with `sigreg_weight: 0` they do, and the MSE goes to zero).
 """
@@ -64,8 +65,9 @@ class JepaLearner(Learner):
         mse = ((pred - target) ** 2).mean(-1)  # [B, T-h]
         pred_loss = (mse * w).sum() / w.sum().clamp(min=1.0)
         real = z[mask > 0]  # [N, D] every real step's embedding
-        dirs = random_directions(cfg.embed_dim, cfg.sigreg_projections, self.generator, self.device)  # [D, M]
-        reg = sigreg(real, dirs, cfg.sigreg_knots, cfg.sigreg_t_max)
+        tested = self.model.regularised(real)  # [N, D'] the embeddings, or the SIGReg head's output
+        dirs = random_directions(tested.shape[-1], cfg.sigreg_projections, self.generator, self.device)  # [D', M]
+        reg = sigreg(tested, dirs, cfg.sigreg_knots, cfg.sigreg_t_max)
         loss = pred_loss + cfg.sigreg_weight * reg
         with torch.no_grad():
             copy = ((z_hist[:, :, -1] - target) ** 2).mean(-1)  # [B, T-h] predicting no change: the bar to beat

@@ -42,6 +42,13 @@ class JepaModel(nn.Module):
         self.projector = Projector(self.conv.out_dim, cfg.proj_hidden, cfg.embed_dim, cfg.act)
         self.predictor = mlp(cfg.history * (cfg.embed_dim + action_dim), [cfg.pred_hidden] * cfg.pred_layers,
                              cfg.embed_dim, cfg.act, norm=True, dropout=cfg.pred_dropout)
+        # SIGReg's input when `sigreg_head` > 0: trained only through SIGReg, never used to plan
+        self.sigreg_head = Projector(cfg.embed_dim, cfg.sigreg_head, cfg.sigreg_head_dim, cfg.act) \
+            if cfg.sigreg_head else None
+
+    def regularised(self, z: torch.Tensor) -> torch.Tensor:
+        """What SIGReg tests: [N, D] embeddings -> [N, D'] (the head's output, or z itself)."""
+        return z if self.sigreg_head is None else self.sigreg_head(z)
 
     def encode(self, frames: torch.Tensor) -> torch.Tensor:
         """uint8 [..., 64, 64, 3] -> embeddings [..., D]."""
@@ -71,7 +78,9 @@ def recalibrate_batchnorm(model: JepaModel, frames: torch.Tensor, chunk: int = 5
     average (momentum 0.1) mixes ~10 batches of older weights, and the embeddings planning
     compares move with it (issue 23: 35% vs 85% success for the same weights).
     """
-    bns = [m for m in model.modules() if isinstance(m, nn.modules.batchnorm._BatchNorm)]
+    # the encoder's and projector's only: the SIGReg head is not on the planning path
+    bns = [m for part in (model.conv, model.projector) for m in part.modules()
+           if isinstance(m, nn.modules.batchnorm._BatchNorm)]
     if not bns or frames.shape[0] == 0:
         return
     was_training, momenta = model.training, [m.momentum for m in bns]
