@@ -69,7 +69,7 @@ def _parser() -> argparse.ArgumentParser:
     e.add_argument("id", nargs="?", help="e.g. gym:CartPole-v1, dmc:cartpole-balance, atari:Pong, board:tictactoe")
     e.add_argument("--pixels", action="store_true", help="dm_control from 64x64 pixels")
 
-    v = sub.add_parser("eval", help="play greedy episodes with a run's latest checkpoint",
+    v = sub.add_parser("eval", help="play greedy (or, with --explore, sampled) episodes with a run's latest checkpoint",
                        description="Greedy episodes with the latest checkpoint of RUN_DIR; prints the returns. "
                        "Board games play the run's opponent: tic-tac-toe's exact solver, connect four's UCT "
                        "search (or you, with --human).")
@@ -78,6 +78,9 @@ def _parser() -> argparse.ArgumentParser:
     v.add_argument("--simulations", type=_positive_int, default=None,
                    help="MuZero family: search simulations per move (default: the run's eval.num_simulations, "
                         "else its algo.search.num_simulations)")
+    v.add_argument("--explore", action="store_true",
+                   help="one-player envs: act as the collectors do (sample the policy) instead of greedily; "
+                        "DreamerV3's own evaluation samples its actor (the run's eval.explore)")
     v.add_argument("--video", default=None, metavar="PATH.gif", help="record the first episode")
     v.add_argument("--human", action="store_true", help="board games: play against the agent at the terminal")
 
@@ -169,7 +172,8 @@ def cmd_envs(a: argparse.Namespace) -> int:
 def cmd_eval(a: argparse.Namespace) -> int:
     from wmdist.runtime.evaluate import evaluate_run
 
-    return evaluate_run(a.run_dir, episodes=a.episodes, video=a.video, human=a.human, simulations=a.simulations or 0)
+    return evaluate_run(a.run_dir, episodes=a.episodes, video=a.video, human=a.human, simulations=a.simulations or 0,
+                        explore=a.explore)
 
 
 def cmd_dream(a: argparse.Namespace) -> int:

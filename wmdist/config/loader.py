@@ -262,6 +262,8 @@ def check_consistency(cfg: RunConfig) -> None:
             raise ConfigError(str(err).strip().splitlines()[0]) from None
     if cfg.eval.num_simulations and not hasattr(getattr(cfg.algo, "search", None), "num_simulations"):
         raise ConfigError(f"eval.num_simulations: algorithm '{cfg.algo_name}' has no tree search (leave it 0)")
+    if cfg.eval.explore and cfg.env.id.startswith("board:"):
+        raise ConfigError("eval.explore: board games are judged greedily against the opponent (leave it false)")
     check_run_name(cfg.run.name)
 
 

@@ -72,6 +72,9 @@ class EvalConfig:
                                     "(0 = not by steps), so a run that learns in 3k steps is seen doing so; "
                                     "with both 0 there is no evaluator", ge=0)
     episodes: int = param(10, "greedy episodes per evaluation", ge=1)
+    explore: bool = param(False, "act as the collectors do instead of greedily: sample the policy (DreamerV3's own "
+                                 "evaluation samples its actor), with the algorithm's exploration noise or visit "
+                                 "temperature where it has them; one-player envs only")
     envs: int = param(5, "envs the evaluator steps together", ge=1, le=4096)
     cpus: float = param(0.25, "Ray CPUs for the evaluator", gt=0)
     opponent_rollouts: int = param(200, "board:connect4: random rollouts per move of the MCTS (UCT) opponent", ge=1)

@@ -78,17 +78,21 @@ def episode_progress(episodes: int, every_seconds: float, err: IO[str]) -> Calla
 
 
 def evaluate_run(run_dir: str, episodes: int = 10, video: str | None = None, human: bool = False,
-                 out: IO[str] | None = None, progress_seconds: float = 10.0, simulations: int = 0) -> int:
-    """`simulations` > 0: search this many simulations per move (as `eval.num_simulations`)."""
+                 out: IO[str] | None = None, progress_seconds: float = 10.0, simulations: int = 0,
+                 explore: bool = False) -> int:
+    """`simulations` > 0: search this many simulations per move (as `eval.num_simulations`); `explore`:
+    act as the collectors do (as `eval.explore`, which the run's own config may also set)."""
     out = out or sys.stdout  # looked up per call: a default bound at import outlives a redirected stdout
     check_output_path(video, "--video")
-    cfg, spec, algo, version, weights, ckpt = load_run(run_dir, [f"eval.num_simulations={simulations}"] if simulations else None)
+    overrides = ([f"eval.num_simulations={simulations}"] if simulations else []) + (["eval.explore=true"] if explore else [])
+    cfg, spec, algo, version, weights, ckpt = load_run(run_dir, overrides or None)
     if cfg.eval.num_simulations:  # the in-training evaluator's search count, not self-play's
         algo = build_algorithm(evaluation_config(cfg), spec, cfg.run.seed + 31_337)
     policy = algo.make_policy("cpu")
     policy.set_weights(weights, version)
     sims = f", {cfg.eval.num_simulations} simulations per move" if cfg.eval.num_simulations else ""
-    print(f"wmdist: {ckpt.name} (weights v{version}) on {cfg.env.id}{sims}", file=out)
+    how = ", actions sampled as in self-play" if cfg.eval.explore else ""
+    print(f"wmdist: {ckpt.name} (weights v{version}) on {cfg.env.id}{sims}{how}", file=out)
     if spec.players == 2:
         from wmdist.envs.factory import make_env
 
@@ -106,7 +110,7 @@ def evaluate_run(run_dir: str, episodes: int = 10, video: str | None = None, hum
     from wmdist.runtime.roles.evaluator import play_episodes
 
     venv = make_vector_env(cfg.env, min(episodes, cfg.eval.envs), cfg.run.seed + 5)
-    returns, lengths = play_episodes(policy, venv, episodes,
+    returns, lengths = play_episodes(policy, venv, episodes, cfg.eval.explore,
                                      on_episode=episode_progress(episodes, progress_seconds, sys.stderr))
     print("returns: " + " ".join(f"{r:.1f}" for r in returns), file=out)
     print(f"mean return {np.mean(returns):.2f} +- {np.std(returns):.2f} over {len(returns)} episodes "

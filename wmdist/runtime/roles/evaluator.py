@@ -1,4 +1,4 @@
-"""Greedy evaluation: the evaluator role during training and `wmdist eval` afterwards."""
+"""Evaluation (greedy unless eval.explore): the evaluator role during training and `wmdist eval` afterwards."""
 from __future__ import annotations
 
 import time
@@ -89,7 +89,7 @@ class EvaluatorRole:
             extra = {"eval_won": float(np.mean(np.asarray(returns) > 0)),
                      "eval_lost": float(np.mean(np.asarray(returns) < 0)), **self._judge()}
         else:
-            returns, lengths = play_episodes(self.policy, self.venv, self.cfg.eval.episodes)
+            returns, lengths = play_episodes(self.policy, self.venv, self.cfg.eval.episodes, self.cfg.eval.explore)
         return {"version": self.version, "returns": returns, "lengths": lengths,
                 "busy_seconds": time.monotonic() - t0, **extra, **self.tag}
 
