@@ -84,8 +84,10 @@ def evaluate_run(run_dir: str, episodes: int = 10, video: str | None = None, hum
     act as the collectors do (as `eval.explore`, which the run's own config may also set)."""
     out = out or sys.stdout  # looked up per call: a default bound at import outlives a redirected stdout
     check_output_path(video, "--video")
-    overrides = ([f"eval.num_simulations={simulations}"] if simulations else []) + (["eval.explore=true"] if explore else [])
-    cfg, spec, algo, version, weights, ckpt = load_run(run_dir, overrides or None)
+    overrides = [f"eval.num_simulations={simulations}"] if simulations else []
+    if explore:
+        overrides.append("eval.explore=true")
+    cfg, spec, algo, version, weights, ckpt = load_run(run_dir, overrides)
     if cfg.eval.num_simulations:  # the in-training evaluator's search count, not self-play's
         algo = build_algorithm(evaluation_config(cfg), spec, cfg.run.seed + 31_337)
     policy = algo.make_policy("cpu")

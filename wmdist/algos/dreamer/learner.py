@@ -11,16 +11,16 @@ import torch
 from wmdist.algos.base import Batch, Learner, NonFiniteLoss, UpdateResult, Weights
 from wmdist.algos.dreamer.config import DreamerConfig
 from wmdist.algos.dreamer.imagine import ActorCriticLoss, Start
+from wmdist.algos.dreamer.nets import ActorCritic, WorldModel, action_to_model
 from wmdist.algos.dreamer.precision import PhasePrecision
 from wmdist.algos.dreamer.replay_value import ReplayStates
-from wmdist.nets.kl import kl_loss, masked_mean
-from wmdist.nets.latent_layers import Latent
-from wmdist.algos.dreamer.nets import ActorCritic, WorldModel, action_to_model
 from wmdist.envs.spec import EnvSpec
 from wmdist.nets.dists import bernoulli_nll, twohot_bins, twohot_loss
+from wmdist.nets.generator import seeded_generator
+from wmdist.nets.kl import kl_loss, masked_mean
+from wmdist.nets.latent_layers import Latent
 from wmdist.nets.optim import GuardedStep, OptimConfig, lr_at
 from wmdist.nets.world_model import load_world_model, world_model_weights
-from wmdist.nets.generator import seeded_generator
 
 
 def policy_weights(wm: WorldModel, ac: ActorCritic) -> Weights:

@@ -21,8 +21,8 @@ from wmdist.algos.jepa.model import FRAME_CHANNELS, JepaModel, model_weights, re
 from wmdist.algos.jepa.sigreg import effective_rank, random_directions, sigreg
 from wmdist.envs.spec import EnvSpec
 from wmdist.nets.actions import action_to_model
-from wmdist.nets.optim import GuardedStep, OptimConfig
 from wmdist.nets.generator import seeded_generator
+from wmdist.nets.optim import GuardedStep, OptimConfig
 
 FIELDS = ("obs", "action", "mask")
 

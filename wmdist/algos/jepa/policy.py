@@ -17,8 +17,8 @@ from wmdist.algos.jepa.model import JepaModel, load_model
 from wmdist.algos.jepa.planning import goal_distance_fn
 from wmdist.envs.spec import EnvSpec
 from wmdist.nets.actions import action_to_env
-from wmdist.search.cem import cem_plan, shift_plan
 from wmdist.nets.generator import seeded_generator
+from wmdist.search.cem import cem_plan, shift_plan
 
 OBS_SHAPE = (64, 64, 6)  # the current frame and the goal image, 3 channels each
 

@@ -18,10 +18,10 @@ from wmdist.algos.planet.config import PlaNetConfig
 from wmdist.algos.planet.overshooting import overshooting_kl
 from wmdist.envs.spec import EnvSpec
 from wmdist.nets.actions import action_to_model
+from wmdist.nets.generator import seeded_generator
 from wmdist.nets.kl import masked_mean
 from wmdist.nets.optim import GuardedStep, OptimConfig
 from wmdist.nets.world_model import WorldModel, world_model_weights
-from wmdist.nets.generator import seeded_generator
 
 FIELDS = ("obs", "action", "reward", "first", "mask")
 

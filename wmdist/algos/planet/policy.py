@@ -18,9 +18,9 @@ from wmdist.algos.planet.config import PlaNetConfig
 from wmdist.algos.planet.planning import reward_sum_fn
 from wmdist.envs.spec import EnvSpec
 from wmdist.nets.actions import action_to_env
+from wmdist.nets.generator import seeded_generator
 from wmdist.nets.world_model import WorldModel, load_world_model
 from wmdist.search.cem import cem_plan, shift_plan
-from wmdist.nets.generator import seeded_generator
 
 
 class PlaNetPolicy(FilteringPolicy):

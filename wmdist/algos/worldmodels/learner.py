@@ -32,8 +32,8 @@ from wmdist.algos.worldmodels.pool import EvalPool
 from wmdist.algos.worldmodels.vae import ConvVAE, vae_loss, vae_terms
 from wmdist.envs.spec import EnvSpec
 from wmdist.nets.actions import action_to_model
-from wmdist.nets.optim import GuardedStep, OptimConfig
 from wmdist.nets.generator import seeded_generator
+from wmdist.nets.optim import GuardedStep, OptimConfig
 
 POOL_ROLE = "wm_eval"
 STAGE_VAE, STAGE_RNN, STAGE_CMA, STAGE_DONE = 0, 1, 2, 3
