@@ -88,12 +88,17 @@ def _parser() -> argparse.ArgumentParser:
                        description="Real frames beside the model's: 5 observed steps, then imagined.")
     d.add_argument("run_dir")
     d.add_argument("--out", default=None, help="output GIF (default RUN_DIR/dream.gif)")
-    d.add_argument("--horizon", type=_positive_int, default=45)
+    d.add_argument("--horizon", type=_positive_int, default=None,
+                   help="imagined steps: of the video (default 45), or the longest horizon --error measures (16)")
     d.add_argument("--check", action="store_true",
                    help="World Models: score the controller and fixed policies in the dream and in the real env, "
                         "side by side (where M is wrong, CMA-ES will exploit it)")
     d.add_argument("--rollouts", type=_positive_int, default=64, help="--check: dream rollouts per policy")
-    d.add_argument("--episodes", type=_positive_int, default=5, help="--check: real episodes per policy")
+    d.add_argument("--episodes", type=_positive_int, default=5, help="--check: real episodes per policy; "
+                                                                       "--error: greedy episodes measured")
+    d.add_argument("--error", action="store_true",
+                   help="Dreamer, PlaNet: RMS error of the model's open-loop predictions 1, 2, 4 ... --horizon steps "
+                        "ahead beside predicting no change, per observation dimension (RUN_DIR/dream_error.json)")
 
     from wmdist.bench.runner import BENCHES, LONG
 
@@ -177,13 +182,20 @@ def cmd_eval(a: argparse.Namespace) -> int:
 
 
 def cmd_dream(a: argparse.Namespace) -> int:
+    from wmdist.config.errors import ConfigError
     from wmdist.runtime.evaluate import dream_run
 
+    if a.check and a.error:
+        raise ConfigError("dream: --check and --error are two different reports; ask for one")
     if a.check:
         from wmdist.runtime.evaluate import dream_check_run
 
         return dream_check_run(a.run_dir, rollouts=a.rollouts, episodes=a.episodes)
-    return dream_run(a.run_dir, out=a.out, horizon=a.horizon)
+    if a.error:
+        from wmdist.runtime.dream_error import dream_error_run
+
+        return dream_error_run(a.run_dir, episodes=a.episodes, horizon=a.horizon or 16)
+    return dream_run(a.run_dir, out=a.out, horizon=a.horizon or 45)
 
 
 def cmd_bench(a: argparse.Namespace) -> int:

@@ -11,8 +11,8 @@ from pathlib import Path
 
 import pytest
 
-from wmdist.algos.base import (CAPABILITIES, CHECKS_DREAM, PACKED_WINDOWS, PLANS, PLOTS_EMBEDDINGS, PREDICTS_OBSERVATIONS,
-                               REANALYZE, TWO_PLAYER, Algorithm)
+from wmdist.algos.base import (CAPABILITIES, CHECKS_DREAM, MEASURES_PREDICTION, PACKED_WINDOWS, PLANS, PLOTS_EMBEDDINGS,
+                               PREDICTS_OBSERVATIONS, REANALYZE, TWO_PLAYER, Algorithm)
 from wmdist.algos.registry import ALGORITHMS, resolve
 from wmdist.cli import main
 from tests.runtime.run_dirs import run_dir_with_checkpoint
@@ -101,7 +101,7 @@ def test_runtime_cli_and_config_never_branch_on_an_algorithm_name():
 
 def test_capability_constants_are_the_known_set():
     assert CAPABILITIES == {PREDICTS_OBSERVATIONS, TWO_PLAYER, REANALYZE, PLANS, PLOTS_EMBEDDINGS, PACKED_WINDOWS,
-                            CHECKS_DREAM}
+                            CHECKS_DREAM, MEASURES_PREDICTION}
     assert all(isinstance(c, str) for c in CAPABILITIES)
     assert Algorithm.capabilities == frozenset()
     with pytest.raises(ValueError, match="unknown capability"):

@@ -58,8 +58,11 @@ PACKED_WINDOWS = "packed_windows"
 # trains a policy inside its model's dream: `dream_check` scores policies in the dream and the real env
 # side by side (`wmdist dream RUN --check`)
 CHECKS_DREAM = "checks_dream"
+# its `world_model(weights)` is an RSSM `WorldModel` (wmdist/nets/world_model.py): `wmdist dream --error`
+# measures how far ahead its open-loop predictions beat "no change"
+MEASURES_PREDICTION = "measures_prediction"
 CAPABILITIES: frozenset[str] = frozenset({PREDICTS_OBSERVATIONS, TWO_PLAYER, REANALYZE, PLANS, PLOTS_EMBEDDINGS,
-                                          PACKED_WINDOWS, CHECKS_DREAM})
+                                          PACKED_WINDOWS, CHECKS_DREAM, MEASURES_PREDICTION})
 
 
 @dataclass(frozen=True)

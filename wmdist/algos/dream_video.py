@@ -34,7 +34,7 @@ class RSSMAlgorithm(Protocol):
     def world_model(self, weights: Weights) -> WorldModel: ...
 
 
-def _rollout(algo: RSSMAlgorithm, weights: Weights, env: Env, steps: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
+def play_greedy(algo: RSSMAlgorithm, weights: Weights, env: Env, steps: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
     """Real observations [steps, *obs] and the actions taken at them [steps, ...]."""
     policy = algo.make_policy()
     policy.set_weights(weights, 0)
@@ -104,7 +104,7 @@ def open_loop_video(algo: RSSMAlgorithm, weights: Weights, env: Env, out_path: s
     """Write the open-loop GIF to `out_path` and return its path."""
     if context < 1 or horizon < 1:
         raise ValueError(f"context and horizon must be >= 1, got {context} and {horizon}")
-    obs, actions = _rollout(algo, weights, env, context + horizon, seed)
+    obs, actions = play_greedy(algo, weights, env, context + horizon, seed)
     preds = predict_open_loop(algo, weights, obs, actions, context, seed)
     if algo.spec.obs_kind == "image":
         frames = [np.concatenate([o, p], 1) for o, p in zip(obs, preds)]  # real | model

@@ -1,7 +1,7 @@
 """Dreamer V1/V2/V3 as one `Algorithm` (the version is configuration)."""
 from __future__ import annotations
 
-from wmdist.algos.base import PACKED_WINDOWS, PREDICTS_OBSERVATIONS, Algorithm, FieldSpec, Weights
+from wmdist.algos.base import MEASURES_PREDICTION, PACKED_WINDOWS, PREDICTS_OBSERVATIONS, Algorithm, FieldSpec, Weights
 from wmdist.algos.dreamer.config import DreamerConfig
 from wmdist.algos.dreamer.learner import DreamerLearner
 from wmdist.algos.dreamer.policy import DreamerPolicy
@@ -14,7 +14,7 @@ class Dreamer(Algorithm):
     name = "dreamer"
     Config = DreamerConfig
     # the decoder turns imagined latents into observations; the RSSM restarts at `first` inside a window
-    capabilities = frozenset({PREDICTS_OBSERVATIONS, PACKED_WINDOWS})
+    capabilities = frozenset({PREDICTS_OBSERVATIONS, PACKED_WINDOWS, MEASURES_PREDICTION})
 
     def __init__(self, spec: EnvSpec, config: DreamerConfig | None = None, seed: int = 0) -> None:
         super().__init__(spec, config if config is not None else DreamerConfig(), seed)

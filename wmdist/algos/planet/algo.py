@@ -1,7 +1,7 @@
 """PlaNet (Hafner et al. 2019) as an `Algorithm`: an RSSM world model and CEM planning."""
 from __future__ import annotations
 
-from wmdist.algos.base import PLANS, PREDICTS_OBSERVATIONS, Algorithm, FieldSpec, Weights
+from wmdist.algos.base import MEASURES_PREDICTION, PLANS, PREDICTS_OBSERVATIONS, Algorithm, FieldSpec, Weights
 from wmdist.algos.planet.config import PlaNetConfig
 from wmdist.algos.planet.learner import PlaNetLearner
 from wmdist.algos.planet.policy import PlaNetPolicy
@@ -14,7 +14,7 @@ class PlaNet(Algorithm):
     name = "planet"
     Config = PlaNetConfig
     # the decoder turns imagined latents into observations; every action is planned with CEM
-    capabilities = frozenset({PREDICTS_OBSERVATIONS, PLANS})
+    capabilities = frozenset({PREDICTS_OBSERVATIONS, PLANS, MEASURES_PREDICTION})
 
     def __init__(self, spec: EnvSpec, config: PlaNetConfig | None = None, seed: int = 0) -> None:
         super().__init__(spec, config if config is not None else PlaNetConfig(), seed)

@@ -9,7 +9,7 @@ import numpy as np
 import torch
 
 from wmdist.algos.base import Weights
-from wmdist.algos.dream_video import _rollout
+from wmdist.algos.dream_video import play_greedy
 from wmdist.algos.worldmodels.mdn import mdn_sample
 from wmdist.envs.env import Env
 from wmdist.nets.actions import action_to_model
@@ -40,7 +40,7 @@ def world_models_video(algo, weights: Weights, env: Env, path: str, context: int
         raise ValueError(f"context and horizon must be >= 1, got {context} and {horizon}")
     import imageio.v2 as imageio
 
-    obs, actions = _rollout(algo, weights, env, context + horizon, 0)
+    obs, actions = play_greedy(algo, weights, env, context + horizon, 0)
     preds = predict_frames(algo, weights, obs, actions, context)
     frames = [np.repeat(np.repeat(np.concatenate([o, p], 1)[..., :3], 4, 0), 4, 1) for o, p in zip(obs, preds)]
     out = Path(path)
