@@ -101,3 +101,18 @@ def test_dream_error_refuses_a_model_without_an_rssm_and_two_reports_at_once(tmp
     assert "RSSM world model" in line and "muzero" in line
     line, _ = one_line_exit_2(capsys, ["dream", str(run_dir), "--error", "--check"])
     assert "--check and --error" in line
+
+
+def test_image_errors_are_one_figure_per_frame_in_unit_scale():
+    spec = EnvSpec("test:img", (64, 64, 3), "uint8", "image", action_shape=(1,), action_low=(-1.0,), action_high=(1.0,))
+    algo = PlaNet(spec, PlaNetConfig(deter=8, stoch=4, units=8, mlp_layers=1, cnn_depth=2))
+    wm = algo.world_model(algo.make_learner().get_weights()).eval()
+    rng = np.random.default_rng(1)
+    obs = rng.integers(0, 256, size=(4, 64, 64, 3), dtype=np.uint8)
+    errors = {1: HorizonError(1), 2: HorizonError(2)}
+    add_episode_errors(wm, spec, obs, rng.uniform(-1, 1, (4, 1)).astype(np.float32), errors)
+    model, still = errors[1].rms()
+    assert model.shape == still.shape == (1,) and errors[1].count == 3 and errors[2].count == 2
+    frames = obs.astype(np.float64) / 255.0
+    np.testing.assert_allclose(still, np.sqrt(((frames[:3] - frames[1:]) ** 2).mean()), rtol=1e-5)
+    assert 0.0 < model[0] < 1.0  # a [0, 1] prediction of [0, 1] frames
