@@ -11,7 +11,7 @@ import torch
 from tests.algos.dreamer.dreamer_loop import tiny_config
 from tests.runtime.one_line import one_line_exit_2
 from tests.runtime.run_dirs import run_dir_with_checkpoint
-from wmdist.algos.dream_error import HorizonError, add_episode_errors, default_horizons
+from wmdist.algos.dream_error import HorizonError, add_episode_errors, default_horizons, format_errors
 from wmdist.algos.dreamer import Dreamer
 from wmdist.algos.planet import PlaNet, PlaNetConfig
 from wmdist.cli import main
@@ -76,6 +76,14 @@ def test_errors_equal_a_plain_per_start_loop(make):
     np.testing.assert_allclose(s, np.sqrt(((obs[[0, 2, 4, 6]] - obs[[1, 3, 5, 7]]) ** 2).mean(0)), rtol=1e-6)
 
 
+def test_the_table_summarises_with_the_median_ratio_over_moving_dimensions():
+    e = HorizonError(1)
+    # per dimension: model 0.5 vs 1 (ratio 0.5), 3 vs 1 (3), 0.1 vs 1 (0.1), 0.2 vs 0 (never moves: left out)
+    e.add(np.array([[0.25, 9.0, 0.01, 0.04]]), np.array([[1.0, 1.0, 1.0, 0.0]]))
+    row = format_errors({1: e}, ["a", "b", "c", "d"])[1]
+    assert row.split()[-1] == "0.50"
+
+
 def test_default_horizons_double_up_to_the_limit():
     assert default_horizons(16) == [1, 2, 4, 8, 16]
     assert default_horizons(12) == [1, 2, 4, 8, 12]
@@ -88,7 +96,7 @@ def test_dream_error_on_a_planet_run_prints_the_table_and_writes_json(tmp_path, 
     run_dir = run_dir_with_checkpoint(tmp_path, "planet_dmc_cartpole_swingup", tiny)
     assert main(["dream", str(run_dir), "--error", "--episodes", "1", "--horizon", "4"]) == 0
     out = capsys.readouterr().out
-    assert "dream error" in out and "obs[4]" in out and "mean ratio" in out
+    assert "dream error" in out and "obs[4]" in out and "median ratio" in out
     report = json.loads((run_dir / "dream_error.json").read_text())
     assert [r["horizon"] for r in report["rows"]] == [1, 2, 4]
     assert report["steps"] == 12 and report["rows"][0]["starts"] == 11  # every step but the last has a next one

@@ -126,15 +126,17 @@ def default_horizons(limit: int) -> list[int]:
 
 def format_errors(errors: dict[int, HorizonError], dims: list[str]) -> list[str]:
     """The table `wmdist dream --error` prints: per horizon, each dimension's model RMS over its
-    no-change RMS, and the mean of those ratios (< 1: the model predicts better than no change)."""
-    lines = [f"{'k':>4}{'starts':>8}  " + "".join(f"{d:>16}" for d in dims) + f"{'mean ratio':>12}"]
+    no-change RMS, and the median of those ratios (< 1: the model predicts better than no change).
+    The median, because a dimension that hardly moves (a balanced pole's cosine) makes its own
+    ratio huge whatever the model does."""
+    lines = [f"{'k':>4}{'starts':>8}  " + "".join(f"{d:>16}" for d in dims) + f"{'median ratio':>14}"]
     for k in sorted(errors):
         e = errors[k]
         if not e.count:
             continue
         model, still = e.rms()
         moving = still > 1e-6  # a dimension that never changes has no no-change error to compare with
-        mean_ratio = f"{float((model[moving] / still[moving]).mean()):>12.2f}" if moving.any() else f"{'-':>12}"
+        ratio = f"{float(np.median(model[moving] / still[moving])):>14.2f}" if moving.any() else f"{'-':>14}"
         cells = "".join(f"{m:>8.3f}/{s:<7.3f}" for m, s in zip(model, still))
-        lines.append(f"{k:>4}{e.count:>8}  {cells}{mean_ratio}")
+        lines.append(f"{k:>4}{e.count:>8}  {cells}{ratio}")
     return lines
