@@ -20,7 +20,6 @@ import torch
 
 from wmdist.envs.spec import EnvSpec
 from wmdist.nets.actions import action_to_model
-from wmdist.nets.dists import symexp
 from wmdist.nets.latent_layers import Latent
 from wmdist.nets.world_model import WorldModel
 
@@ -36,8 +35,6 @@ class HorizonError:
 
     def add(self, model_sq: np.ndarray, still_sq: np.ndarray) -> None:
         """Add per-start squared errors [S, D]."""
-        if model_sq.shape[0] == 0:
-            return
         m, s = model_sq.sum(0), still_sq.sum(0)
         self.model_sq = m if self.model_sq is None else self.model_sq + m
         self.still_sq = s if self.still_sq is None else self.still_sq + s
@@ -59,14 +56,6 @@ def _cat(latents: list[Latent]) -> Latent:
 def _draw(rssm, stats: torch.Tensor, generator: torch.Generator | None) -> Latent:
     """A latent from its distribution: sampled with a generator, its mode without one."""
     return rssm.mode(stats) if generator is None else rssm.sample(stats, generator, grad=False)
-
-
-def _to_obs_units(wm: WorldModel, pred: torch.Tensor) -> np.ndarray:
-    """Decoder output [N, ...] -> observations in the units the errors use ([0, 1] for images)."""
-    pred = pred.float()
-    if wm.image:
-        return (pred + 0.5).clamp(0, 1).numpy()
-    return (symexp(pred) if wm.cfg.symlog_targets else pred).numpy()
 
 
 @torch.no_grad()
@@ -102,12 +91,14 @@ def add_episode_errors(wm: WorldModel, spec: EnvSpec, obs: np.ndarray, actions: 
         live = starts + k < t_len  # [S] starts whose o_{t+k} is real
         if not live.any():
             break
+        # every start keeps rolling (a finished one on the last action, its output unused), so a sampled
+        # run draws the same noise whatever the episode's length
         step = torch.as_tensor(np.minimum(starts + k - 1, t_len - 1))
         h = rssm.img_step(h, z, rssm.action_part(act[step]))  # a_{t+k-1} -> h_{t+k}
         z = _draw(rssm, rssm.prior(h), generator)
         if k not in errors:
             continue
-        pred = _to_obs_units(wm, wm.decode(h, z))[live]  # [S', *obs]
+        pred = wm.target_to_obs(wm.decode(h, z)).numpy()[live]  # [S', *obs] in error units
         target = real[starts[live] + k]
         sq_model, sq_still = (pred - target) ** 2, (now[live] - target) ** 2
         if wm.image:  # one figure per frame: the mean over pixels and channels

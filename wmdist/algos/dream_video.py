@@ -20,7 +20,6 @@ from wmdist.algos.base import Policy, Weights
 from wmdist.envs.env import Env
 from wmdist.envs.spec import EnvSpec
 from wmdist.nets.actions import action_to_model
-from wmdist.nets.dists import symexp
 from wmdist.nets.world_model import WorldModel
 
 
@@ -34,7 +33,8 @@ class RSSMAlgorithm(Protocol):
     def world_model(self, weights: Weights) -> WorldModel: ...
 
 
-def play_greedy(algo: RSSMAlgorithm, weights: Weights, env: Env, steps: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
+def play_greedy(algo: RSSMAlgorithm, weights: Weights, env: Env, steps: int,
+                seed: int) -> tuple[np.ndarray, np.ndarray]:
     """Real observations [steps, *obs] and the actions taken at them [steps, ...]."""
     policy = algo.make_policy()
     policy.set_weights(weights, 0)
@@ -72,11 +72,9 @@ def predict_open_loop(algo: RSSMAlgorithm, weights: Weights, obs: np.ndarray, ac
             z = rssm.sample(rssm.post(h, rssm.embed_part(wm.encode(obs_t[t:t + 1]))), gen, grad=False)
         else:
             z = rssm.prior_sample(h, gen, grad=False)
-        pred = wm.decode(h, z)[0]
+        pred = wm.target_to_obs(wm.decode(h, z))[0]
         if wm.image:
-            pred = ((pred + 0.5).clamp(0, 1) * 255).to(torch.uint8)
-        elif wm.cfg.symlog_targets:
-            pred = symexp(pred)
+            pred = (pred * 255).to(torch.uint8)
         preds.append(pred.numpy())
         a_prev = act_t[t:t + 1]
     return np.stack(preds)

@@ -14,7 +14,7 @@ from torch import nn
 
 from wmdist.envs.spec import EnvSpec
 from wmdist.nets.conv import ConvDecoder, ConvEncoder
-from wmdist.nets.dists import symlog
+from wmdist.nets.dists import symexp, symlog
 from wmdist.nets.latent_layers import Heads, Latent
 from wmdist.nets.mlp import mlp
 from wmdist.nets.rssm import RSSM, RSSMConfig, RSSMSettings
@@ -93,6 +93,14 @@ class WorldModel(nn.Module):
             return obs.float() / 255.0 - 0.5
         x = obs.float()
         return symlog(x) if self.cfg.symlog_targets else x
+
+    def target_to_obs(self, pred: torch.Tensor) -> torch.Tensor:
+        """The inverse of `obs_target` for decoder outputs: observations in their own units (float),
+        pixels in [0, 1] (clamped)."""
+        pred = pred.float()
+        if self.image:
+            return (pred + 0.5).clamp(0, 1)
+        return symexp(pred) if self.cfg.symlog_targets else pred
 
     def filter_step(
         self,
