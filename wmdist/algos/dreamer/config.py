@@ -123,6 +123,10 @@ class DreamerConfig:
                                         "actor_lr x actor_lr_decay_to, then stays (0 = constant, as the papers)", ge=0)
     actor_lr_decay_to: float = param(1.0, "the factor the actor's learning rate reaches after actor_lr_decay_updates",
                                      gt=0, le=1)
+    # not in the papers: the acting policy then changes smoothly between neighbouring versions (issue 24)
+    publish_ema: float = param(0.0, "decay per update of an exponential moving average of the world model and "
+                               "actor that collectors, the evaluator and checkpoints get (Polyak averaging); "
+                               "0 publishes the learner's own weights", ge=0, lt=1)
     model_clip: float | None = param(None, "world-model gradient norm clip", ge=0)
     ac_clip: float | None = param(None, "actor and critic gradient norm clip", ge=0)
     adam_eps: float | None = param(None, "Adam epsilon", gt=0)

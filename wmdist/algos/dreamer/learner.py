@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import contextlib
+import copy
 import dataclasses
 from typing import Any, Mapping
 
@@ -20,13 +21,14 @@ from wmdist.nets.generator import seeded_generator
 from wmdist.nets.kl import kl_loss, masked_mean
 from wmdist.nets.latent_layers import Latent
 from wmdist.nets.optim import GuardedStep, OptimConfig, lr_at
+from wmdist.nets.polyak import polyak_
 from wmdist.nets.world_model import load_world_model, world_model_weights
 
 
-def policy_weights(wm: WorldModel, ac: ActorCritic) -> Weights:
+def policy_weights(wm: WorldModel, actor: torch.nn.Module) -> Weights:
     """World model + actor as numpy (what policies and the dream video need)."""
     out = world_model_weights(wm)
-    out.update({f"actor.{k}": v.detach().cpu().numpy() for k, v in ac.actor.state_dict().items()})
+    out.update({f"actor.{k}": v.detach().cpu().numpy() for k, v in actor.state_dict().items()})
     return out
 
 
@@ -58,6 +60,10 @@ class DreamerLearner(Learner):
         self.generator = seeded_generator(self.device, seed)
         self.updates = 0
         follow = "bf16" if cfg.bf16 else "fp32"
+        # What get_weights publishes when cfg.publish_ema > 0: slow copies of the world model and actor.
+        self.ema: tuple[WorldModel, torch.nn.Module] | None = (
+            (copy.deepcopy(self.wm).requires_grad_(False), copy.deepcopy(self.ac.actor).requires_grad_(False))
+            if cfg.publish_ema > 0 else None)
         self.precision = PhasePrecision(
             {"world_model": cfg.precision_world_model or follow, "actor_critic": cfg.precision_actor_critic or follow},
             self.device, cfg.precision_trials)
@@ -146,11 +152,14 @@ class DreamerLearner(Learner):
         self.updates += 1
         if self.cfg.slow_critic != "none" and self.updates % self.cfg.slow_critic_every == 0:
             self.ac.update_slow(self.cfg.slow_critic_mix)
+        if self.ema is not None:
+            polyak_(self.ema[0], self.wm, 1.0 - self.cfg.publish_ema)
+            polyak_(self.ema[1], self.ac.actor, 1.0 - self.cfg.publish_ema)
         metrics.update(ac_metrics)
         return UpdateResult(metrics=metrics)
 
     def get_weights(self) -> Weights:
-        return policy_weights(self.wm, self.ac)
+        return policy_weights(*self.ema) if self.ema is not None else policy_weights(self.wm, self.ac.actor)
 
     def state_dict(self) -> dict[str, Any]:
         return {
@@ -159,6 +168,7 @@ class DreamerLearner(Learner):
             "critic_opt": self.critic_opt.state_dict(), "return_norm": self.ac_loss.norm.state_dict(),
             "generator": self.generator.get_state(), "updates": self.updates,
             "precision": self.precision.state_dict(),
+            **({"ema_wm": self.ema[0].state_dict(), "ema_actor": self.ema[1].state_dict()} if self.ema else {}),
         }
 
     def load_state_dict(self, state: Mapping[str, Any]) -> None:
@@ -171,6 +181,9 @@ class DreamerLearner(Learner):
         self.generator.set_state(torch.as_tensor(state["generator"]))
         self.updates = int(state["updates"])
         self.precision.load_state_dict(state.get("precision", {}))  # older checkpoints: measure again
+        if self.ema is not None:  # a checkpoint from a run without the average starts it at the weights
+            self.ema[0].load_state_dict(state.get("ema_wm", state["wm"]))
+            self.ema[1].load_state_dict(state.get("ema_actor", self.ac.actor.state_dict()))
 
 
 def _select(lat: Latent, rows: torch.Tensor) -> Latent:

@@ -11,6 +11,7 @@ from wmdist.algos.dreamer.config import DreamerConfig
 from wmdist.envs.spec import EnvSpec
 from wmdist.nets.actions import action_to_env, action_to_model
 from wmdist.nets.latent_layers import Heads, Latent
+from wmdist.nets.polyak import polyak_
 from wmdist.nets.world_model import WorldModel, head_width
 
 __all__ = ["ActorCritic", "WorldModel", "action_to_env", "action_to_model"]
@@ -35,7 +36,5 @@ class ActorCritic(nn.Module):
         return ActionDist(out, self.spec.discrete, c.actor_dist_cont, c.unimix, c.actor_min_std, c.actor_max_std,
                           c.actor_init_std)
 
-    @torch.no_grad()
     def update_slow(self, mix: float) -> None:
-        for slow, fast in zip(self.slow_critic.parameters(), self.critic.parameters()):
-            slow.lerp_(fast, mix)
+        polyak_(self.slow_critic, self.critic, mix, copy_buffers=False)

@@ -42,6 +42,9 @@ class MuZeroConfig:
     bootstrap: str = param("search_value", "value bootstrap: stored search_value (refreshed by reanalyze) or a target network",
                            choices=("search_value", "target"))
     target_update_every: int = param(100, "updates between target-network refreshes (bootstrap=target)", ge=1)
+    publish_ema: float = param(0.0, "decay per update of an exponential moving average of the weights that actors, "
+                                     "reanalyzers, the evaluator and checkpoints get (Polyak averaging; not in the "
+                                     "papers); 0 publishes the learner's own weights", ge=0, lt=1)
     value_loss_weight: float = param(1.0, "weight of the value loss (Reanalyze paper: 0.25)", ge=0)
     reward_loss_weight: float = param(1.0, "weight of the reward loss", ge=0)
     policy_loss_weight: float = param(1.0, "weight of the policy loss", ge=0)

@@ -16,6 +16,7 @@ from wmdist.algos.muzero.networks import MuZeroNet
 from wmdist.algos.muzero.symmetry import Symmetries
 from wmdist.algos.muzero.targets import UnrollTargets, make_targets, sample_starts
 from wmdist.nets.optim import GuardedStep
+from wmdist.nets.polyak import polyak_
 from wmdist.nets.support import support_to_scalar
 
 REQUIRED = ("obs", "action", "reward", "first", "last", "terminal", "search_policy", "search_value", "mask", "is_weight")
@@ -28,6 +29,9 @@ class MuZeroLearner(Learner):
         self.device = torch.device(device)
         self.net = net.to(self.device)
         self.target_net = copy.deepcopy(self.net).eval()
+        # What get_weights publishes when cfg.publish_ema > 0: a slow average that smooths the
+        # acting policy over the last ~1 / (1 - decay) updates.
+        self.ema_net = copy.deepcopy(self.net).eval() if cfg.publish_ema > 0 else None
         self.num_actions = num_actions
         # Two-player games: each ply flips the point of view (see targets.py).
         self.gamma = -cfg.search.discount if players == 2 else cfg.search.discount
@@ -106,6 +110,7 @@ class MuZeroLearner(Learner):
         self.updates += 1
         if cfg.bootstrap == "target" and self.updates % cfg.target_update_every == 0:
             self.target_net.load_state_dict(self.net.state_dict())
+        self._update_ema()
         err = np.abs(out.value0.cpu().numpy() - z[:, 0])  # [B] |v^0 - z_t|
         metrics = {
             "loss": float(loss.detach()), "value_loss": float(out.value_loss), "reward_loss": float(out.reward_loss),
@@ -114,14 +119,19 @@ class MuZeroLearner(Learner):
         }
         return UpdateResult(metrics, priorities=(err + cfg.priority_eps).astype(np.float32))
 
+    def _update_ema(self) -> None:
+        if self.ema_net is not None:
+            polyak_(self.ema_net, self.net, 1.0 - self.cfg.publish_ema)
+
     def get_weights(self) -> Weights:
-        return to_numpy_weights(self.net)
+        return to_numpy_weights(self.ema_net if self.ema_net is not None else self.net)
 
     def state_dict(self) -> dict[str, Any]:
         return {
             "net": copy.deepcopy(self.net.state_dict()), "target_net": copy.deepcopy(self.target_net.state_dict()),
             "optim": copy.deepcopy(self.step.state_dict()), "updates": self.updates,
             "rng": self.rng.bit_generator.state,
+            **({"ema_net": copy.deepcopy(self.ema_net.state_dict())} if self.ema_net is not None else {}),
         }
 
     def load_state_dict(self, state: Mapping[str, Any]) -> None:
@@ -130,3 +140,5 @@ class MuZeroLearner(Learner):
         self.step.load_state_dict(state["optim"])
         self.updates = int(state["updates"])
         self.rng.bit_generator.state = state["rng"]
+        if self.ema_net is not None:  # a checkpoint from a run without the average starts it at the weights
+            self.ema_net.load_state_dict(state.get("ema_net", state["net"]))
