@@ -81,7 +81,7 @@ class DreamerConfig:
     kl_rep: float | None = param(None, "representation KL scale, trains the posterior (V2: 0.2; V3: 0.1)", ge=0)
     free_nats: float | None = param(None, "KL terms are clipped below at this many nats (V1: 3, V3: 1)", ge=0)
     free_avg: bool | None = param(None, "apply free nats to the batch-mean KL (V1/V2) instead of per step (V3)")
-    recon_scale: float = param(1.0, "decoder loss scale, 1 / the decoder's variance (papers: 1; the V1 and V3 "
+    recon_scale: float = param(1.0, "decoder loss scale, 1 / the decoder's variance (papers: 1; the V1, V2 and V3 "
                                     "dm_control presets from a 5-d state and the V3 MinAtar ones: 100, so the model "
                                     "encodes the pole or the ball rather than pay its KL)", ge=0)
     reward_scale: float = param(1.0, "reward loss scale", ge=0)
