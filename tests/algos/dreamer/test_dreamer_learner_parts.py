@@ -39,6 +39,39 @@ def test_backprop_actor_gradient_flows_through_dynamics_but_not_into_model_weigh
     assert grads and sum(float(g.abs().sum()) for g in grads) > 0
 
 
+def test_discrete_backprop_actor_sees_one_hot_actions_and_gets_the_dynamics_gradient():
+    """actor_grad_disc=backprop: the dynamics read the sampled one-hot action (straight-through), and
+    with rewards zeroed and no entropy term the actor's only gradient comes back through the dynamics
+    and the critic's values of the imagined states."""
+    from wmdist.algos.dreamer.imagine import imagine
+
+    spec = bench_spec(True)
+    cfg = tiny_config(3, actor_grad_disc="backprop", actor_entropy=0.0, cont_head=False)
+    learner = Dreamer(spec, cfg).make_learner()
+    with torch.no_grad():
+        reward_out = learner.wm.heads.tails["reward"][-1]
+        reward_out.weight.zero_()
+        reward_out.bias.zero_()
+        torch.nn.init.normal_(learner.ac.critic.tails["critic"][-1].weight, std=0.5)
+    t = learner._tensors(random_batch(spec, 3, 6))
+    _, _, start = learner.world_model_loss(t)
+
+    # the same generator state gives the same actions with and without backprop: the forward pass
+    # is the REINFORCE one, only the gradient path differs
+    g1, g2 = torch.Generator().manual_seed(5), torch.Generator().manual_seed(5)
+    with torch.no_grad():
+        plain = imagine(learner.wm, learner.ac, start, 4, False, g1)
+    st = imagine(learner.wm, learner.ac, start, 4, True, g2)
+    torch.testing.assert_close(st.deter.detach(), plain.deter)
+
+    actor_loss, _, _ = learner.ac_loss(start, learner.generator)
+    actor_loss.backward()
+    assert all(p.grad is None for p in learner.wm.parameters())
+    assert all(p.grad is None for p in learner.ac.critic.parameters())
+    grad = sum(float(p.grad.abs().sum()) for p in learner.ac.actor.parameters() if p.grad is not None)
+    assert grad > 1e-6
+
+
 @pytest.mark.parametrize("version", [1, 2, 3])
 def test_backprop_actor_gets_the_horizon_values_gradient(version):
     """With rewards and continuation constant, the actor's only signal is the value inside the
