@@ -5,6 +5,7 @@ import torch
 
 from dreamer_loop import tiny_config
 from wmdist.algos.dreamer import Dreamer
+from wmdist.algos.dreamer.imagine import imagine
 from wmdist.bench.dreamer import bench_spec, random_batch
 
 
@@ -39,22 +40,27 @@ def test_backprop_actor_gradient_flows_through_dynamics_but_not_into_model_weigh
     assert grads and sum(float(g.abs().sum()) for g in grads) > 0
 
 
-def test_discrete_backprop_actor_sees_one_hot_actions_and_gets_the_dynamics_gradient():
-    """actor_grad_disc=backprop: the dynamics read the sampled one-hot action (straight-through), and
-    with rewards zeroed and no entropy term the actor's only gradient comes back through the dynamics
-    and the critic's values of the imagined states."""
-    from wmdist.algos.dreamer.imagine import imagine
-
-    spec = bench_spec(True)
-    cfg = tiny_config(3, actor_grad_disc="backprop", actor_entropy=0.0, cont_head=False)
+def _value_only_start(spec, cfg):
+    """A learner whose reward head predicts 0 and whose critics start away from zero (twohot critics
+    start at zero), and the start states of one batch: the actor's only signal is the critic's value."""
     learner = Dreamer(spec, cfg).make_learner()
     with torch.no_grad():
         reward_out = learner.wm.heads.tails["reward"][-1]
         reward_out.weight.zero_()
         reward_out.bias.zero_()
-        torch.nn.init.normal_(learner.ac.critic.tails["critic"][-1].weight, std=0.5)
+        for net in (learner.ac.critic, learner.ac.slow_critic):
+            torch.nn.init.normal_(net.tails["critic"][-1].weight, std=0.5)
     t = learner._tensors(random_batch(spec, 3, 6))
     _, _, start = learner.world_model_loss(t)
+    return learner, start
+
+
+def test_discrete_backprop_actor_sees_one_hot_actions_and_gets_the_dynamics_gradient():
+    """actor_grad_disc=backprop: the dynamics read the sampled one-hot action (straight-through), and
+    with rewards zeroed and no entropy term the actor's only gradient comes back through the dynamics
+    and the critic's values of the imagined states."""
+    cfg = tiny_config(3, actor_grad_disc="backprop", actor_entropy=0.0, cont_head=False)
+    learner, start = _value_only_start(bench_spec(True), cfg)
 
     # the same generator state gives the same actions with and without backprop: the forward pass
     # is the REINFORCE one, only the gradient path differs
@@ -76,16 +82,8 @@ def test_discrete_backprop_actor_sees_one_hot_actions_and_gets_the_dynamics_grad
 def test_backprop_actor_gets_the_horizon_values_gradient(version):
     """With rewards and continuation constant, the actor's only signal is the value inside the
     returns: each version's return critic (V2: the target copy) must pass gradient to the states."""
-    spec = bench_spec(False)
-    learner = Dreamer(spec, tiny_config(version, actor_entropy=0.0, cont_head=False, reward_head="mse")).make_learner()
-    with torch.no_grad():
-        reward_out = learner.wm.heads.tails["reward"][-1]
-        reward_out.weight.zero_()
-        reward_out.bias.zero_()
-        for net in (learner.ac.critic, learner.ac.slow_critic):  # twohot critics start at zero
-            torch.nn.init.normal_(net.tails["critic"][-1].weight, std=0.5)
-    t = learner._tensors(random_batch(spec, 3, 6))
-    _, _, start = learner.world_model_loss(t)
+    cfg = tiny_config(version, actor_entropy=0.0, cont_head=False, reward_head="mse")
+    learner, start = _value_only_start(bench_spec(False), cfg)
     actor_loss, _, _ = learner.ac_loss(start, learner.generator)
     actor_loss.backward()
     grad = sum(float(p.grad.abs().sum()) for p in learner.ac.actor.parameters() if p.grad is not None)
