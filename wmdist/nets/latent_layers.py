@@ -59,17 +59,23 @@ def compute_dtype(x: torch.Tensor) -> torch.dtype:
 
 
 class _StraightThroughRows(torch.autograd.Function):
-    """Value 0; gradient w.r.t. probs [N, Z] is grad_out @ W^T (the straight-through path)."""
+    """Value 0; gradient w.r.t. probs [N, Z] is grad_out @ W^T (the straight-through path).
+
+    The backward matmul runs in `dtype`, the forward's compute dtype, as autocast runs a dense
+    `onehot @ W`'s backward: bf16 under bf16 autocast. In fp32 it was the largest matmul of a
+    continuous update ([H*N, U] x [U, 1024] for the heads, one per imagined step for the dynamics).
+    """
 
     @staticmethod
     def forward(ctx, probs: torch.Tensor, weight: torch.Tensor, dtype: torch.dtype) -> torch.Tensor:  # type: ignore[override]
-        ctx.save_for_backward(weight)
+        ctx.save_for_backward(weight.to(dtype))  # no copy when dtype is already the weight's
+        ctx.probs_dtype = probs.dtype
         return probs.new_zeros(probs.shape[0], weight.shape[1], dtype=dtype)
 
     @staticmethod
     def backward(ctx, grad: torch.Tensor):  # type: ignore[override]
-        (weight,) = ctx.saved_tensors
-        return grad.to(weight.dtype) @ weight.t(), None, None
+        (weight,) = ctx.saved_tensors  # [Z, D] in the compute dtype
+        return (grad.to(weight.dtype) @ weight.t()).to(ctx.probs_dtype), None, None
 
 
 class _OneHotMatmul(torch.autograd.Function):

@@ -234,3 +234,46 @@ def test_without_decay_the_actor_keeps_its_rate():
     learner = Dreamer(spec, tiny_config(3, actor_lr=1e-3)).make_learner()
     batch = random_batch(spec, 3, 6)
     assert [learner.update(batch).metrics["actor_lr"] for _ in range(3)] == [1e-3] * 3
+
+
+@pytest.mark.parametrize("slow_critic", ["reg", "target"])  # V3's critic or V2's target copy inside the returns
+def test_backprop_actor_gradient_matches_the_plain_full_stack_computation(slow_critic):
+    """The actor loss reads the imagined states 1..H as their own stack (no slices of an [H + 1]
+    stack, whose backward zero-fills and adds (H + 1) x N x S x C gradients). Reference: the plain
+    way, one [H + 1] stack with zero straight-through probs for the start states, heads on a slice
+    of it and the returns' critic on all of it; same samples, so the same actor gradient."""
+    from wmdist.algos.dreamer.imagine import _freeze
+    from wmdist.algos.dreamer.returns import lambda_returns
+    from wmdist.nets.dists import twohot_mean
+    from wmdist.nets.kl import masked_mean
+    from wmdist.nets.latent_layers import Latent
+
+    cfg = tiny_config(3, actor_entropy=0.0, return_norm="none", slow_critic=slow_critic)
+    learner, start = _value_only_start(bench_spec(False), cfg)
+    wm, ac, c = learner.wm, learner.ac, learner.cfg
+    ret_critic = ac.slow_critic if slow_critic == "target" else ac.critic
+    with torch.no_grad():  # a reward head that is not zero, so rewards and values both carry gradient
+        torch.nn.init.normal_(wm.heads.tails["reward"][-1].weight, std=0.5)
+
+    actor_loss, _, _ = learner.ac_loss(start, torch.Generator().manual_seed(7))
+    fast = torch.autograd.grad(actor_loss, list(ac.actor.parameters()))
+
+    n, H = start.deter.shape[0], c.horizon
+    with _freeze(wm), _freeze(ret_critic):
+        tr = imagine(wm, ac, start, H, True, torch.Generator().manual_seed(7))
+        probs = torch.cat([torch.zeros_like(tr.tail_latent.probs[:n]), tr.tail_latent.probs])  # [(H+1)*N, S, C]
+        full = {"h": torch.cat([start.deter, tr.tail_deter]), "z": Latent(tr.latent.index, probs, classes=c.classes)}
+        tail = {"h": full["h"][n:], "z": Latent(tr.latent.index[n:], probs[n:], classes=c.classes)}
+        heads = wm.heads(tail, upto=wm.last_head)
+        reward = twohot_mean(heads["reward"], learner.bins).reshape(H, n)
+        cont = torch.sigmoid(heads["cont"].float().squeeze(-1)).reshape(H, n)
+        value = twohot_mean(ret_critic(full)["critic"], learner.bins).reshape(H + 1, n)
+    disc = c.discount * cont
+    returns = lambda_returns(reward, disc, value, c.lam)
+    weight = (torch.cat([torch.ones_like(disc[:1]), disc[:-1]]).cumprod(0) * start.cont).detach()
+    plain = torch.autograd.grad(masked_mean(-(returns - value[:-1].detach()), weight), list(ac.actor.parameters()))
+
+    torch.testing.assert_close(actor_loss, masked_mean(-(returns - value[:-1].detach()), weight))
+    for a, b in zip(fast, plain):
+        torch.testing.assert_close(a, b)
+    assert sum(float(g.abs().sum()) for g in fast) > 1e-6
