@@ -142,7 +142,7 @@ class ActorCriticLoss:
             ret_critic = ac.slow_critic if cfg.slow_critic == "target" else ac.critic  # V2: a periodic copy
             if self.backprop:
                 with torch.no_grad():
-                    v0 = value[0] if ret_critic is ac.critic else self._value(ret_critic(_head_rows(feats_sg, n))["critic"])
+                    v0 = value[0] if ret_critic is ac.critic else self._value(ret_critic({"h": start.deter, "z": start.latent})["critic"])
                 with _freeze(ret_critic):  # no weight gradients for the critic from the actor's loss
                     v_tail = self._value(ret_critic(tail_feats)["critic"])  # [H*N]
                 value_ret = torch.cat([v0, v_tail]).reshape(H + 1, n)
@@ -225,11 +225,6 @@ class ActorCriticLoss:
             nll = 0.5 * (logits.float().squeeze(-1) - target.flatten()).pow(2)
         w = rep.weight * (1.0 - rep.terminal.float())  # a terminal state has no return to learn
         return masked_mean(nll.reshape(b, t_len), w), float(masked_mean(target, w))
-
-
-def _head_rows(feats: dict, n: int) -> dict:
-    """The features of the start states (the first n rows)."""
-    return {"h": feats["h"][:n], "z": _rows(feats["z"], slice(0, n))}
 
 
 def _rows(lat: Latent, rows: slice) -> Latent:
