@@ -40,6 +40,10 @@ class JepaConfig:
     sigreg_head_dim: int = param(16, "output width of that head (the dimension of SIGReg's Gaussian)", ge=1)
     # --- optimisation -----------------------------------------------------------------
     lr: float = param(3e-4, "Adam learning rate", gt=0)
+    publish_ema: float = param(0.0, "decay per update of an exponential moving average of the weights that the "
+                                     "evaluator plans with and checkpoints keep (Polyak averaging; not in LeWM), its "
+                                     "BatchNorm statistics re-estimated for the average; 0 publishes the learner's "
+                                     "own weights", ge=0, lt=1)
     grad_clip: float = param(100.0, "gradient norm clip (0 = none)", ge=0)
     # --- acting -----------------------------------------------------------------------
     planner: CEMConfig = section(CEMConfig, "CEM planner toward the goal embedding, run at every step (MPC; "

@@ -9,6 +9,7 @@ embeddings from collapsing (with `sigreg_weight: 0` they do, and the MSE goes to
 """
 from __future__ import annotations
 
+import copy
 from collections import deque
 from typing import Any, Mapping
 
@@ -23,6 +24,7 @@ from wmdist.envs.spec import EnvSpec
 from wmdist.nets.actions import action_to_model
 from wmdist.nets.generator import seeded_generator
 from wmdist.nets.optim import GuardedStep, OptimConfig
+from wmdist.nets.polyak import polyak_
 
 FIELDS = ("obs", "action", "mask")
 
@@ -39,6 +41,9 @@ class JepaLearner(Learner):
         torch.manual_seed(seed)
         self.model = JepaModel(cfg, spec.action_dim).to(self.device)
         self.opt = GuardedStep(self.model.parameters(), OptimConfig(kind="adam", lr=cfg.lr, clip_norm=cfg.grad_clip))
+        # What get_weights publishes when cfg.publish_ema > 0: a slow average of the weights, so that the
+        # embedding the planner compares distances in changes less from one published version to the next.
+        self.ema_model = copy.deepcopy(self.model).eval() if cfg.publish_ema > 0 else None
         self.generator = seeded_generator(self.device, seed)
         self.updates = 0
         self._frames: deque[torch.Tensor] = deque()  # the latest batches' real frames, [N_i, 64, 64, 3] uint8 each
@@ -97,23 +102,29 @@ class JepaLearner(Learner):
         if not torch.isfinite(loss.detach()).all():
             raise NonFiniteLoss(f"jepa loss is {float(loss.detach())}")
         metrics["grad_norm"] = self.opt(loss)
+        if self.ema_model is not None:  # buffers are re-estimated at publish, not averaged
+            polyak_(self.ema_model, self.model, 1.0 - self.cfg.publish_ema, copy_buffers=False)
         if self.cfg.bn_frames:
             self._keep_frames(batch)
         self.updates += 1
         return UpdateResult(metrics=metrics)
 
     def get_weights(self) -> Weights:
+        published = self.ema_model if self.ema_model is not None else self.model
         recent = self.recent
         if recent is not None:  # the statistics planning uses, for exactly these weights
-            recalibrate_batchnorm(self.model, recent)
-        return model_weights(self.model, self.updates)
+            recalibrate_batchnorm(published, recent)
+        return model_weights(published, self.updates)
 
     def state_dict(self) -> dict[str, Any]:
         return {"model": self.model.state_dict(), "opt": self.opt.state_dict(), "generator": self.generator.get_state(),
-                "updates": self.updates}
+                "updates": self.updates,
+                **({"ema_model": self.ema_model.state_dict()} if self.ema_model is not None else {})}
 
     def load_state_dict(self, state: Mapping[str, Any]) -> None:
         self.model.load_state_dict(state["model"])
         self.opt.load_state_dict(state["opt"])
         self.generator.set_state(torch.as_tensor(state["generator"]))
         self.updates = int(state["updates"])
+        if self.ema_model is not None:  # a checkpoint from a run without the average starts it at the weights
+            self.ema_model.load_state_dict(state.get("ema_model", state["model"]))
