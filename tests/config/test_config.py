@@ -1,6 +1,7 @@
 """Config loading: overlays, --set precedence, and one-line errors for every kind of mistake."""
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import pytest
@@ -82,3 +83,33 @@ def test_cli_config_prints_resolved_yaml(capsys):
     assert main(["config", CHILD, "--docs"]) == 0
     docs = capsys.readouterr().out
     assert "actors.num" in docs and "number of collector actors" in docs and "algo.lr" in docs
+
+
+def test_a_preset_copied_out_of_configs_finds_its_defaults_among_the_presets(tmp_path):
+    """Users copy a preset elsewhere and edit it: its `defaults: [base, ...]` still resolve
+    (beside the file first, then the shipped presets), and it loads exactly as the original."""
+    presets = Path(__file__).parents[2] / "configs"
+    copy = tmp_path / "mine.yaml"
+    copy.write_text((presets / "efficientzero_cartpole.yaml").read_text())  # defaults: [base, muzero_cartpole]
+    assert dump_yaml(load_config(copy)) == dump_yaml(load_config(presets / "efficientzero_cartpole.yaml"))
+    # a file beside the copy wins over the preset of the same name
+    (tmp_path / "muzero_cartpole.yaml").write_text("defaults: [base]\nalgo: {name: muzero, td_steps: 7}\n")
+    assert load_config(copy).algo.td_steps == 50  # the copy's own value still wins over both
+    (tmp_path / "k.yaml").write_text("defaults: [muzero_cartpole]\nrun: {seed: 3}\n")
+    assert load_config(tmp_path / "k.yaml").algo.td_steps == 7
+
+
+@pytest.mark.parametrize("text, message", [
+    ("defaults: [nosuch]\n", "defaults entry 'nosuch' names no config: no nosuch.yaml beside it"),
+    ("defaults: 3\n", "defaults must be a list of config names, got int"),
+    ("defaults: [[base]]\n", "defaults entries are config names (e.g. base), got ['base']"),
+])
+def test_bad_defaults_are_one_line(tmp_path, text, message):
+    (tmp_path / "c.yaml").write_text(text)
+    with pytest.raises(ConfigError, match=re.escape(message)):
+        load_config(tmp_path / "c.yaml")
+
+
+def test_a_directory_given_as_the_config_is_one_line(tmp_path):
+    with pytest.raises(ConfigError, match="is a directory, not a config file"):
+        load_config(tmp_path)

@@ -17,6 +17,9 @@ from wmdist.config.errors import ConfigError, closest
 from wmdist.config.schema import RunConfig
 
 MAX_DEFAULTS_DEPTH = 8
+# The shipped presets (`base`, `muzero_cartpole`, ...): a config copied out of the project's
+# `configs/` keeps its `defaults:` working, since names not found beside the file are looked up here.
+PRESETS_DIR = Path(__file__).resolve().parents[2] / "configs"
 
 _FLOAT_TAG = "tag:yaml.org,2002:float"
 # PyYAML's YAML 1.1 float needs a dot and a signed exponent (`1.0e-4`), so `1e-4`, `3e5` and
@@ -45,6 +48,8 @@ def parse_yaml(text: str) -> Any:
 
 def read_yaml_mapping(path: Path) -> dict:
     """A YAML file's top-level mapping; a missing file, bad YAML or another top level is one ConfigError line."""
+    if path.is_dir():
+        raise ConfigError(f"{path} is a directory, not a config file (e.g. {path / 'base.yaml'})")
     if not path.is_file():
         raise ConfigError(f"config file not found: {path}")
     try:
@@ -68,8 +73,21 @@ def _merge(base: dict, over: dict) -> dict:
     return out
 
 
+def _find_default(path: Path, name: Any) -> Path:
+    """The file a `defaults:` entry of `path` names: beside it, else among the shipped presets."""
+    if not isinstance(name, str) or not name.strip():
+        raise ConfigError(f"{path}: defaults entries are config names (e.g. base), got {name!r}")
+    file = name if name.endswith((".yaml", ".yml")) else f"{name}.yaml"
+    for folder in (path.parent, PRESETS_DIR):
+        if (folder / file).is_file():
+            return folder / file
+    raise ConfigError(f"{path}: defaults entry {name!r} names no config: no {file} beside it"
+                      + (f" or among the presets in {PRESETS_DIR}" if PRESETS_DIR.is_dir() else ""))
+
+
 def load_yaml_tree(path: str | os.PathLike, depth: int = 0) -> dict:
-    """A file with its `defaults: [name, ...]` overlays (files beside it) merged underneath."""
+    """A file with its `defaults: [name, ...]` overlays merged underneath (each found beside the
+    file, else among the shipped presets)."""
     path = Path(path)
     if depth > MAX_DEFAULTS_DEPTH:
         raise ConfigError(f"{path}: defaults nest deeper than {MAX_DEFAULTS_DEPTH} (a cycle?)")
@@ -77,10 +95,11 @@ def load_yaml_tree(path: str | os.PathLike, depth: int = 0) -> dict:
     defaults = data.pop("defaults", []) or []
     if isinstance(defaults, str):
         defaults = [defaults]
+    if not isinstance(defaults, list):
+        raise ConfigError(f"{path}: defaults must be a list of config names, got {type(defaults).__name__}")
     merged: dict = {}
     for name in defaults:
-        ref = path.parent / (name if str(name).endswith((".yaml", ".yml")) else f"{name}.yaml")
-        merged = _merge(merged, load_yaml_tree(ref, depth + 1))
+        merged = _merge(merged, load_yaml_tree(_find_default(path, name), depth + 1))
     return _merge(merged, data)
 
 
