@@ -36,7 +36,7 @@ run: setup
 	$(BIN)/wmdist train $(CONFIG) $(RUN_ARGS)
 
 test: setup system-deps
-	$(BIN)/python -m pytest -q
+	$(BIN)/python -m pytest -q --durations=15   # the slowest tests, to watch the 15-minute budget
 
 bench: setup
 	$(BIN)/wmdist bench all --json
