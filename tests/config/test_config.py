@@ -111,5 +111,9 @@ def test_bad_defaults_are_one_line(tmp_path, text, message):
 
 
 def test_a_directory_given_as_the_config_is_one_line(tmp_path):
-    with pytest.raises(ConfigError, match="is a directory, not a config file"):
+    (tmp_path / "a.yaml").write_text("run: {seed: 1}\n")
+    with pytest.raises(ConfigError, match=re.escape("is a directory, not a config file (it holds a.yaml, ...)")):
+        load_config(tmp_path)
+    (tmp_path / "config.yaml").write_text("run: {seed: 1}\n")  # a run directory: say how to continue it
+    with pytest.raises(ConfigError, match=re.escape(f"continue it with `wmdist train --resume {tmp_path}`")):
         load_config(tmp_path)

@@ -49,7 +49,12 @@ def parse_yaml(text: str) -> Any:
 def read_yaml_mapping(path: Path) -> dict:
     """A YAML file's top-level mapping; a missing file, bad YAML or another top level is one ConfigError line."""
     if path.is_dir():
-        raise ConfigError(f"{path} is a directory, not a config file (e.g. {path / 'base.yaml'})")
+        if (path / "config.yaml").is_file():  # a run directory given where a config goes
+            raise ConfigError(f"{path} is a run directory, not a config file; continue it with "
+                              f"`wmdist train --resume {path}`")
+        inside = sorted(p.name for p in path.glob("*.yaml"))[:3]
+        raise ConfigError(f"{path} is a directory, not a config file"
+                          + (f" (it holds {', '.join(inside)}, ...)" if inside else ""))
     if not path.is_file():
         raise ConfigError(f"config file not found: {path}")
     try:
