@@ -391,3 +391,14 @@ CONFIGS = Path(__file__).parents[2] / "configs"
 def test_per_decision_work_and_depth_past_any_paper_are_refused(preset, override):
     key = override.split("=")[0]
     assert _one_line_error([override], str(CONFIGS / f"{preset}.yaml")).startswith(f"{key}: ")
+
+
+# --- a collectors' greedy share that would do nothing ----------------------------------
+
+
+@pytest.mark.parametrize("overrides, message", [
+    (["algo.search.gumbel=true", "algo.greedy_fraction=0.25"], "algo.greedy_fraction has no effect with algo.search.gumbel"),
+    (["algo.greedy_fraction=1.5"], "algo.greedy_fraction: 1.5 is out of range (must be <= 1)"),
+])
+def test_greedy_fraction_out_of_range_or_with_gumbel_is_one_line(overrides, message):
+    assert message in _one_line_error(overrides, MUZERO)

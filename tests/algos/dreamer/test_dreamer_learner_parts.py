@@ -277,3 +277,24 @@ def test_backprop_actor_gradient_matches_the_plain_full_stack_computation(slow_c
     for a, b in zip(fast, plain):
         torch.testing.assert_close(a, b)
     assert sum(float(g.abs().sum()) for g in fast) > 1e-6
+
+
+@pytest.mark.parametrize("discrete", [True, False])
+def test_greedy_fraction_makes_the_last_envs_act_on_the_actors_mode_while_the_rest_sample(discrete):
+    spec = bench_spec(discrete)
+    pol = Dreamer(spec, tiny_config(1, actor_init_std=1.0, expl_noise=0.3, greedy_fraction=0.25)).make_policy()
+    modes = []  # each call's mode, read off the distribution the policy acts on (its latents are sampled)
+    policy_fn = pol.ac.policy
+
+    def spy(h, z):
+        dist = policy_fn(h, z)
+        modes.append(dist.mode().cpu().numpy())
+        return dist
+
+    pol.ac.policy = spy
+    obs = np.random.default_rng(0).normal(size=(8, *spec.obs_shape)).astype(np.float32)
+    acted = np.stack([pol.act(obs, np.ones(8, bool), None, None, explore=True)[0] for _ in range(30)])
+    mode = np.stack(modes).reshape(acted.shape)  # [30, 8, ...]
+    same = np.isclose(acted, mode, atol=1e-6).reshape(30, 8, -1).all(-1)  # [30, 8]
+    assert same[:, 6:].all()  # envs 6 and 7 (a quarter of 8): always the mode, no sampling and no noise
+    assert not same[:, :6].all(0).any()  # every other env leaves the mode at least once

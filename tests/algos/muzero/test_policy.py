@@ -40,3 +40,29 @@ def test_greedy_policy_is_deterministic_and_explore_is_not():
     np.testing.assert_allclose(ex["search_policy"].sum(-1), 1.0, atol=1e-6)
     explored = np.stack([policy.act(obs, first, None, None, explore=True)[0] for _ in range(5)])
     assert (explored != g1).any()  # root noise and sampling at temperature 1
+
+
+def test_greedy_fraction_makes_the_last_envs_of_a_collector_act_on_the_argmax_of_their_visits():
+    from wmdist.algos.greedy_share import greedy_envs
+
+    assert [greedy_envs(0.25, e) for e in (8, 4, 1)] == [2, 1, 1]  # a positive share is never rounded to 0
+    assert greedy_envs(0.0, 8) == 0 and greedy_envs(1.0, 8) == 8
+    spec = EnvSpec(id="test:vec", obs_shape=(4,), obs_dtype="float32", obs_kind="vector", num_actions=3)
+    cfg = MuZeroConfig(search=SearchConfig(num_simulations=12), latent_dim=8, hidden=[16], value_support=5,
+                       reward_support=3, greedy_fraction=0.25)
+    policy = MuZero(spec, cfg, seed=0).make_policy()
+    seen = []  # (visit counts, actions) of each exploring call, read off the searcher's result
+    run = policy.searcher.run
+
+    def spy(*args, **kw):
+        res = run(*args, **kw)
+        seen.append(res.visit_counts.copy())
+        return res
+
+    policy.searcher.run = spy
+    obs = np.random.default_rng(1).normal(size=(8, 4)).astype(np.float32)
+    acted = [policy.act(obs, np.zeros(8, bool), None, None, explore=True)[0] for _ in range(40)]
+    counts, actions = np.stack(seen), np.stack(acted)  # [40, 8, 3], [40, 8]
+    on_argmax = actions == counts.argmax(-1)  # [40, 8]
+    assert on_argmax[:, 6:].all()  # envs 6 and 7: always the most visited action
+    assert not on_argmax[:, :6].all()  # the others still sample at temperature 1

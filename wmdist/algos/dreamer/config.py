@@ -104,6 +104,9 @@ class DreamerConfig:
     actor_init_std: float = param(5.0, "std of the continuous actor at initialisation (tanh_normal; V1 authors' code: 5, "
                                   "which saturates the tanh for most samples)", gt=0)
     expl_noise: float | None = param(None, "Gaussian noise added to the actor's sample when exploring (V1: 0.3)", ge=0)
+    greedy_fraction: float = param(0.0, "share of each collector's envs that act on the actor's mode instead of its "
+                                         "sample, so replay holds the states the greedy policy reaches "
+                                         "(wmdist/algos/greedy_share.py; not in the papers)", ge=0, le=1)
     return_norm: str | None = param(None, "advantage normalisation (V3: percentile P5-P95)", choices=("none", "percentile"))
     return_decay: float = param(0.99, "EMA decay of the return percentiles", ge=0, lt=1)
     return_low: float = param(0.05, "lower return percentile", ge=0, le=1)

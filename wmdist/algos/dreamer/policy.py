@@ -7,6 +7,7 @@ import torch.nn.functional as F
 
 from wmdist.algos.base import Weights
 from wmdist.algos.filtering import FilteringPolicy
+from wmdist.algos.greedy_share import greedy_rows
 from wmdist.algos.dreamer.config import DreamerConfig
 from wmdist.algos.dreamer.learner import load_policy_weights
 from wmdist.algos.dreamer.nets import ActorCritic, WorldModel, action_to_env
@@ -19,7 +20,7 @@ class DreamerPolicy(FilteringPolicy):
 
     Exploration samples the actor; V1 also adds N(0, expl_noise) to that sample (the authors'
     code: `actor(feat).sample()`, then additive Gaussian noise 0.3, clipped to [-1, 1]).
-    Greedy (explore=False) takes the actor's mode.
+    Greedy (explore=False) takes the actor's mode, as do the `greedy_fraction` share of envs when exploring.
     """
 
     def __init__(self, cfg: DreamerConfig, spec: EnvSpec, device: str = "cpu", seed: int = 0) -> None:
@@ -37,6 +38,18 @@ class DreamerPolicy(FilteringPolicy):
     def set_progress(self, env_steps: int, updates: int) -> None:
         self.env_steps = env_steps
 
+    def _choose(self, dist, explore: bool) -> torch.Tensor:
+        """The actor's sample (exploring) or mode; exploring, the `greedy_fraction` share of
+        envs (the last rows) take the mode, as the evaluator does."""
+        if not explore:
+            return dist.mode()
+        action = dist.sample(self.generator)
+        greedy = greedy_rows(self.cfg.greedy_fraction, action.shape[0])
+        if greedy.any():
+            rows = torch.as_tensor(greedy, device=self.device)
+            action[rows] = dist.mode()[rows]
+        return action
+
     @torch.no_grad()
     def act(self, obs, first, legal, to_play, explore):  # type: ignore[override]
         h, z, _ = self.filter(obs, first)
@@ -45,12 +58,13 @@ class DreamerPolicy(FilteringPolicy):
             if legal is not None:
                 mask = torch.as_tensor(np.array(legal, bool), device=self.device)
                 dist.logp = dist.logp.masked_fill(~mask, -torch.inf)
-            action = dist.sample(self.generator) if explore else dist.mode()
+            action = self._choose(dist, explore)
             a_model = F.one_hot(action, self.spec.num_actions).float()
         else:
-            action = dist.sample(self.generator) if explore else dist.mode()
+            action = self._choose(dist, explore)
             if explore and self.cfg.expl_noise > 0:  # V1: Gaussian noise around the actor's sample
                 noise = torch.randn(action.shape, generator=self.generator, device=self.device)
+                noise[torch.as_tensor(greedy_rows(self.cfg.greedy_fraction, action.shape[0]), device=self.device)] = 0
                 action = action + self.cfg.expl_noise * noise
             action = action.clamp(-1, 1)
             a_model = action

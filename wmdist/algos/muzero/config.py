@@ -59,12 +59,19 @@ class MuZeroConfig:
     # acting
     visit_temperatures: list[float] = param([1.0, 0.5, 0.25], "visit-count temperatures in turn (paper Atari: 1, 0.5, 0.25)", ge=0)
     temperature_env_steps: list[int] = param([10_000, 20_000], "env steps at which the next temperature starts", ge=0)
+    greedy_fraction: float = param(0.0, "share of each collector's envs that act greedily (temperature 0, root noise kept), "
+                                         "so replay holds the states the greedy policy reaches (wmdist/algos/greedy_share.py; "
+                                         "not in the MuZero paper); pUCT only",
+                                   ge=0, le=1)
     temperature_moves: int = param(0, "board games: moves per episode at temperature 1 before playing greedily (0 = use the env-step schedule)", ge=0)
 
     def validate(self) -> "MuZeroConfig":
         if self.search.value_prefix and not self.has_value_prefix_net():
             raise ValueError("algo.search.value_prefix needs a network with a value-prefix head (LSTM); "
                              "muzero's has none (use algo.name: efficientzero)")
+        if self.search.gumbel and self.greedy_fraction > 0:
+            raise ValueError("algo.greedy_fraction has no effect with algo.search.gumbel (sequential halving chooses "
+                             "every action); set one of them")
         if len(self.conv_downsample_blocks) != 3:
             raise ValueError(f"algo.conv_downsample_blocks needs 3 entries, got {self.conv_downsample_blocks}")
         if len(self.visit_temperatures) != len(self.temperature_env_steps) + 1:

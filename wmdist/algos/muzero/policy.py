@@ -4,6 +4,7 @@ from __future__ import annotations
 import numpy as np
 
 from wmdist.algos.base import Policy
+from wmdist.algos.greedy_share import greedy_rows
 from wmdist.algos.muzero.config import MuZeroConfig
 from wmdist.algos.muzero.networks import MuZeroNet
 from wmdist.algos.muzero.searching import SearchingRole
@@ -50,6 +51,7 @@ class MuZeroPolicy(SearchingRole, Policy):
             temps = np.where(self.moves < self.cfg.temperature_moves, 1.0, 0.0)
         else:
             temps = np.full(e, temperature_at(self.cfg, self.env_steps))
+        temps[greedy_rows(self.cfg.greedy_fraction, e)] = 0.0  # the last envs act greedily
         self.moves += 1
         return temps
 
