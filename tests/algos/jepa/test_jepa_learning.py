@@ -70,3 +70,57 @@ def test_predictor_dropout_acts_while_training_and_is_off_when_planning():
     torch.testing.assert_close(model.predict(z, a), model.predict(z, a))
     plain = JepaModel(small_config(), action_dim=2)
     assert not any(isinstance(m, torch.nn.Dropout) for m in plain.predictor)  # default 0: no layer at all
+
+
+
+def test_rollout_loss_equals_a_plain_loop_over_the_predictors_own_steps():
+    """algo.rollout_steps K: each window's first embedding rolled forward K times by the
+    predictor (its own outputs fed back), each step compared with the real embedding; steps
+    past an episode's end are left out."""
+    from wmdist.algos.jepa.model import FRAME_CHANNELS
+
+    spec = env_spec(EnvConfig(id="nav:open"))
+    learner = Jepa(spec, small_config(rollout_steps=3, pred_dropout=0.0), seed=0).make_learner()
+    learner.model.eval()  # running BatchNorm statistics, so the loop's single rows embed as the batch does
+    rng = np.random.default_rng(0)
+    b, t_len = 3, 5
+    batch = {"obs": rng.integers(0, 255, size=(b, t_len, 64, 64, 6), dtype=np.uint8),
+             "action": rng.uniform(-1, 1, size=(b, t_len, 2)).astype(np.float32),
+             "mask": np.ones((b, t_len), bool)}
+    batch["mask"][2, 2:] = False  # row 2's episode ends after its second step: only its first prediction counts
+    with torch.no_grad():
+        _, metrics = learner.loss(batch)
+        total, count = 0.0, 0
+        for r in range(b):
+            z = learner.model.encode(torch.as_tensor(batch["obs"][r:r + 1, :, :, :, :FRAME_CHANNELS]))[0]  # [T, D]
+            z_hat = z[0][None, None]  # [1, h=1, D]
+            for k in range(3):
+                a = torch.as_tensor(batch["action"][r, k])[None, None]  # [1, 1, A]
+                z_hat = learner.model.predict(z_hat, a)[:, None]  # [1, 1, D]: fed back, not the real z
+                if batch["mask"][r, k + 1]:
+                    total += float(((z_hat[0, 0] - z[k + 1]) ** 2).mean())
+                    count += 1
+    assert count == 7
+    np.testing.assert_allclose(metrics["pred_loss"], total / count, rtol=1e-4)
+    learner1 = Jepa(spec, small_config(pred_dropout=0.0), seed=0).make_learner()  # K = 1: the teacher-forced loss
+    learner1.model.load_state_dict(learner.model.state_dict())
+    learner1.model.eval()
+    with torch.no_grad():
+        assert abs(learner1.loss(batch)[1]["pred_loss"] - metrics["pred_loss"]) > 1e-4  # not the same loss
+
+
+def test_rollout_steps_longer_than_the_windows_is_a_one_line_config_error():
+    from pathlib import Path
+
+    import pytest
+
+    from wmdist.config.errors import ConfigError
+    from wmdist.config.loader import load_config
+    from wmdist.runtime.preflight import check_env_and_algo
+
+    preset = str(Path(__file__).parents[3] / "configs" / "jepa_nav_tworooms.yaml")
+    cfg = load_config(preset, ["algo.rollout_steps=3"])  # the preset's windows hold 2 steps
+    with pytest.raises(ConfigError) as err:
+        check_env_and_algo(cfg)
+    assert "needs replay.seq_len >= algo.history + rollout_steps = 4, got 2" in str(err.value)
+    check_env_and_algo(load_config(preset, ["algo.rollout_steps=3", "replay.seq_len=4"]))  # long enough: no error

@@ -45,6 +45,9 @@ class Jepa(Algorithm):
         if run.replay.seq_len <= self.cfg.history:
             raise ValueError(f"jepa: replay.seq_len ({run.replay.seq_len}) must exceed algo.history "
                              f"({self.cfg.history}): each window needs a next step to predict")
+        if self.cfg.rollout_steps > 1 and run.replay.seq_len < self.cfg.history + self.cfg.rollout_steps:
+            raise ValueError(f"jepa: algo.rollout_steps {self.cfg.rollout_steps} needs replay.seq_len >= algo.history + "
+                             f"rollout_steps = {self.cfg.history + self.cfg.rollout_steps}, got {run.replay.seq_len}")
 
     def extra_fields(self) -> dict[str, FieldSpec]:
         return {}  # embeddings are recomputed from the frames

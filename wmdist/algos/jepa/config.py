@@ -26,6 +26,10 @@ class JepaConfig:
     pred_layers: int = param(2, "hidden layers of the predictor MLP", ge=1, le=MAX_LAYERS)
     pred_dropout: float = param(0.0, "dropout after each hidden layer of the predictor while training (LeWM: 0.1); "
                                      "off when planning", ge=0, lt=1)
+    rollout_steps: int = param(1, "K: the predictor is trained on its own K-step open-loop rollouts from each window's "
+                                  "first history, as planning uses it, each step's MSE against the real embedding "
+                                  "(1 = LeWM's teacher-forced next-step loss at every step); needs replay.seq_len >= "
+                                  "history + K", ge=1, le=MAX_LAYERS)
     act: str = param("silu", "activation", choices=("elu", "silu", "relu", "tanh"))
     # --- loss -------------------------------------------------------------------------
     sigreg_weight: float = param(0.09, "lambda of MSE + lambda x SIGReg (LeWM: 0.09); 0 = the collapse ablation", ge=0)

@@ -2,6 +2,9 @@
 
     L = MSE(pred(z_{t-h+1..t}, a_{t-h+1..t}), z_{t+1}) + lambda * SIGReg(z)
 
+(with `rollout_steps` K > 1 the MSE is over the predictor's own K-step rollout from the window's
+first history instead, as planning rolls it out)
+
 with z = projector(encoder(frame)) for every real step of the batch (or SIGReg(head(z)) with
 `sigreg_head`, LeJEPA's arrangement: the head is regularised, z is what planning compares). Both sides of the MSE
 carry gradients: there is no stop-gradient and no EMA target; SIGReg alone keeps the
@@ -19,6 +22,7 @@ import torch
 from wmdist.algos.base import Batch, Learner, NonFiniteLoss, UpdateResult, Weights
 from wmdist.algos.jepa.config import JepaConfig
 from wmdist.algos.jepa.model import FRAME_CHANNELS, JepaModel, model_weights, recalibrate_batchnorm
+from wmdist.algos.jepa.planning import rollout
 from wmdist.algos.jepa.sigreg import effective_rank, random_directions, sigreg
 from wmdist.envs.spec import EnvSpec
 from wmdist.nets.actions import action_to_model
@@ -64,11 +68,14 @@ class JepaLearner(Learner):
         action = action_to_model(torch.as_tensor(np.array(batch["action"]), device=self.device), self.spec)  # [B, T, A]
         z = self.model.encode(obs[..., :FRAME_CHANNELS])  # [B, T, D]
         z_hist, a_hist = history_windows(z, h), history_windows(action, h)  # [B, T-h, h, D], [B, T-h, h, A]
-        pred = self.model.predict(z_hist.flatten(0, 1), a_hist.flatten(0, 1)).reshape(b, t_len - h, -1)  # [B, T-h, D]
         target = z[:, h:]  # z_{t+1} [B, T-h, D], with gradients (no stop-gradient)
         w = mask[:, h:] * is_weight[:, None]  # [B, T-h]: the target step is real
-        mse = ((pred - target) ** 2).mean(-1)  # [B, T-h]
-        pred_loss = (mse * w).sum() / w.sum().clamp(min=1.0)
+        if cfg.rollout_steps > 1:
+            pred_loss = self.rollout_loss(z, action, mask[:, h:], is_weight)
+        else:
+            pred = self.model.predict(z_hist.flatten(0, 1), a_hist.flatten(0, 1)).reshape(b, t_len - h, -1)  # [B, T-h, D]
+            mse = ((pred - target) ** 2).mean(-1)  # [B, T-h]
+            pred_loss = (mse * w).sum() / w.sum().clamp(min=1.0)
         real = z[mask > 0]  # [N, D] every real step's embedding
         tested = self.model.regularised(real)  # [N, D'] the embeddings, or the SIGReg head's output
         dirs = random_directions(tested.shape[-1], cfg.sigreg_projections, self.generator, self.device)  # [D', M]
@@ -80,6 +87,20 @@ class JepaLearner(Learner):
                        "copy_loss": float((copy * w).sum() / w.sum().clamp(min=1.0)),
                        "effective_rank": effective_rank(real), "embed_std": float(real.std(0).mean())}
         return loss, metrics
+
+    def rollout_loss(self,
+                     z: torch.Tensor,  # [B, T, D] every step's embedding
+                     action: torch.Tensor,  # [B, T, A]
+                     real: torch.Tensor,  # [B, T-h] 1 where the step after each history is real
+                     is_weight: torch.Tensor,  # [B]
+                     ) -> torch.Tensor:
+        """MSE of K-step open-loop predictions from each window's first history (planning's own
+        rollout, `planning.rollout`) against the real z_{h..h+K-1}, averaged over real steps."""
+        h, k = self.cfg.history, self.cfg.rollout_steps
+        pred = rollout(self.model, z[:, :h], action[:, :h - 1], action[:, h - 1:h - 1 + k])  # [B, K, D]
+        w = real[:, :k] * is_weight[:, None]  # [B, K]: past an episode's end nothing is compared
+        mse = ((pred - z[:, h:h + k]) ** 2).mean(-1)  # [B, K]
+        return (mse * w).sum() / w.sum().clamp(min=1.0)
 
     def _keep_frames(self, batch: Batch) -> None:
         """Hold the batch's real frames; drop whole older batches the latest `bn_frames` no longer need."""
