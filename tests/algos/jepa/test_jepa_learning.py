@@ -72,7 +72,6 @@ def test_predictor_dropout_acts_while_training_and_is_off_when_planning():
     assert not any(isinstance(m, torch.nn.Dropout) for m in plain.predictor)  # default 0: no layer at all
 
 
-
 def test_rollout_loss_equals_a_plain_loop_over_the_predictors_own_steps():
     """algo.rollout_steps K: each window's first embedding rolled forward K times by the
     predictor (its own outputs fed back), each step compared with the real embedding; steps

@@ -38,33 +38,35 @@ class DreamerPolicy(FilteringPolicy):
     def set_progress(self, env_steps: int, updates: int) -> None:
         self.env_steps = env_steps
 
-    def _choose(self, dist, explore: bool) -> torch.Tensor:
-        """The actor's sample (exploring) or mode; exploring, the `greedy_fraction` share of
-        envs (the last rows) take the mode, as the evaluator does."""
+    def _choose(self, dist, explore: bool, greedy: torch.Tensor | None) -> torch.Tensor:
+        """The actor's sample (exploring) or mode; exploring, the `greedy` rows [E] bool (the
+        `greedy_fraction` share of envs; None: none) take the mode, as the evaluator does."""
         if not explore:
             return dist.mode()
         action = dist.sample(self.generator)
-        greedy = greedy_rows(self.cfg.greedy_fraction, action.shape[0])
-        if greedy.any():
-            rows = torch.as_tensor(greedy, device=self.device)
-            action[rows] = dist.mode()[rows]
+        if greedy is not None:
+            action[greedy] = dist.mode()[greedy]
         return action
 
     @torch.no_grad()
     def act(self, obs, first, legal, to_play, explore):  # type: ignore[override]
         h, z, _ = self.filter(obs, first)
         dist = self.ac.policy(h, z)
+        greedy = None  # [E] bool rows that act on the mode while exploring
+        if explore and self.cfg.greedy_fraction > 0:
+            greedy = torch.as_tensor(greedy_rows(self.cfg.greedy_fraction, h.shape[0]), device=self.device)
         if self.spec.discrete:
             if legal is not None:
                 mask = torch.as_tensor(np.array(legal, bool), device=self.device)
                 dist.logp = dist.logp.masked_fill(~mask, -torch.inf)
-            action = self._choose(dist, explore)
+            action = self._choose(dist, explore, greedy)
             a_model = F.one_hot(action, self.spec.num_actions).float()
         else:
-            action = self._choose(dist, explore)
+            action = self._choose(dist, explore, greedy)
             if explore and self.cfg.expl_noise > 0:  # V1: Gaussian noise around the actor's sample
                 noise = torch.randn(action.shape, generator=self.generator, device=self.device)
-                noise[torch.as_tensor(greedy_rows(self.cfg.greedy_fraction, action.shape[0]), device=self.device)] = 0
+                if greedy is not None:
+                    noise[greedy] = 0
                 action = action + self.cfg.expl_noise * noise
             action = action.clamp(-1, 1)
             a_model = action
