@@ -402,3 +402,17 @@ def test_per_decision_work_and_depth_past_any_paper_are_refused(preset, override
 ])
 def test_greedy_fraction_out_of_range_or_with_gumbel_is_one_line(overrides, message):
     assert message in _one_line_error(overrides, MUZERO)
+
+
+# --- JEPA's per-step planning cost where it would do nothing -----------------------------
+
+JEPA = str(Path(__file__).parents[2] / "configs" / "jepa_nav_tworooms.yaml")
+
+
+@pytest.mark.parametrize("overrides, message", [
+    (["algo.goal_cost=last", "algo.step_cost=0.1"], "algo.step_cost (0.1) only acts with algo.goal_cost: min"),
+    (["algo.goal_cost=sum", "algo.step_cost=0.1"], "algo.step_cost (0.1) only acts with algo.goal_cost: min"),
+    (["algo.step_cost=-0.1"], "algo.step_cost: -0.1 is out of range"),
+])
+def test_jepa_step_cost_without_the_closest_approach_cost_is_one_line(overrides, message):
+    assert message in _one_line_error(overrides, JEPA)

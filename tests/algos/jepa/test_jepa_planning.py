@@ -39,7 +39,57 @@ def test_rollout_with_history_matches_step_by_step_prediction():
     torch.testing.assert_close(got, torch.stack(zs[2:], 1))
 
 
-@pytest.mark.parametrize("cost,tolerance", [("sum", 0.02), ("last", 0.1)])
+def test_goal_costs_against_a_step_by_step_computation():
+    """last, sum and min of the squared distances along the imagined path, by hand on the known model;
+    a plan that passes through the goal and walks on is best under `min` alone."""
+    model = _Shift(small_config(embed_dim=2), action_dim=2)
+    z0, goal = torch.tensor([[0.0, 0.0]]), torch.tensor([[0.2, 0.0]])  # [E=1, D]
+    actions = torch.tensor([[[[1.0, 0.0]] * 4,  # passes the goal at step 2, ends 0.2 beyond it
+                             [[0.5, 0.0]] * 4,  # ends on the goal
+                             [[0.0, 1.0]] * 4]])  # walks away   -> [E=1, J=3, H=4, A=2]
+    want = {c: [] for c in ("last", "sum", "min")}
+    for j in range(3):
+        pos, dists = z0[0].clone(), []
+        for k in range(4):
+            pos = pos + 0.1 * actions[0, j, k]
+            dists.append(float(((pos - goal[0]) ** 2).sum()))
+        want["last"].append(-dists[-1])
+        want["sum"].append(-sum(dists))
+        want["min"].append(-min(dists))
+    for cost, expected in want.items():
+        got = goal_distance_fn(model, z0[:, None], torch.zeros(1, 0, 2), goal, cost)(actions)  # [1, 3]
+        np.testing.assert_allclose(got[0].numpy(), expected, rtol=1e-5, atol=1e-7)
+    by_min = goal_distance_fn(model, z0[:, None], torch.zeros(1, 0, 2), goal, "min")(actions)[0]
+    assert float(by_min[0]) == pytest.approx(0.0, abs=1e-7) and float(by_min[0]) >= float(by_min[1])
+    with pytest.raises(ValueError, match="goal cost"):
+        goal_distance_fn(model, z0[:, None], torch.zeros(1, 0, 2), goal, "mean")
+
+
+def test_step_cost_prefers_the_earlier_arrival():
+    """min_k (d_k + beta k) by hand; both plans pass through the goal, the detour later, and only a step cost
+    tells them apart."""
+    model = _Shift(small_config(embed_dim=2), action_dim=2)
+    z0, goal = torch.tensor([[0.0, 0.0]]), torch.tensor([[0.2, 0.0]])
+    straight = [[1.0, 0.0], [1.0, 0.0], [0.0, 0.0], [0.0, 0.0], [0.0, 0.0], [0.0, 0.0]]  # there at step 2, stays
+    detour = [[0.0, 1.0], [0.0, 1.0], [1.0, 0.0], [1.0, 0.0], [0.0, -1.0], [0.0, -1.0]]  # there at step 6
+    actions = torch.tensor([[straight, detour]])  # [E=1, J=2, H=6, A=2]
+    for beta in (0.0, 0.01):
+        want = []
+        for j in range(2):
+            pos, costs = z0[0].clone(), []
+            for k in range(6):
+                pos = pos + 0.1 * actions[0, j, k]
+                costs.append(float(((pos - goal[0]) ** 2).sum()) + beta * (k + 1))
+            want.append(-min(costs))
+        got = goal_distance_fn(model, z0[:, None], torch.zeros(1, 0, 2), goal, "min", step_cost=beta)(actions)[0]
+        np.testing.assert_allclose(got.numpy(), want, rtol=1e-5, atol=1e-7)
+        if beta == 0.0:
+            assert float(got[0]) == pytest.approx(float(got[1]), abs=1e-7)  # both reach it: a tie
+        else:
+            assert float(got[0]) > float(got[1]) + 0.03  # 0.01 x (6 - 2) apart
+
+
+@pytest.mark.parametrize("cost,tolerance", [("sum", 0.02), ("last", 0.1), ("min", 0.1)])
 def test_cem_moves_toward_the_goal_embedding_and_mpc_reaches_it(cost, tolerance):
     model = _Shift(small_config(embed_dim=2), action_dim=2)
     cfg = CEMConfig(horizon=4, candidates=200, top_k=20, iterations=5)

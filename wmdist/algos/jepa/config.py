@@ -53,8 +53,12 @@ class JepaConfig:
     planner: CEMConfig = section(CEMConfig, "CEM planner toward the goal embedding, run at every step (MPC; "
                                             "LeWM: J 300, K 30, I 30)")
     goal_cost: str = param("last", "planning cost: last = squared distance of the last predicted embedding to the goal's "
-                                   "(LeWM); sum = summed over every predicted step (fixes the first action)",
-                           choices=("last", "sum"))
+                                   "(LeWM); sum = summed over every predicted step (fixes the first action); min = the "
+                                   "closest approach over the horizon",
+                           choices=("last", "sum", "min"))
+    step_cost: float = param(0.0, "with goal_cost min: added per imagined step before the minimum, min_k (d_k + "
+                                  "step_cost x k), so of two plans that reach the goal the earlier one wins (a shorter "
+                                  "path, not a detour); in units of squared embedding distance", ge=0)
     explore_keep: float = param(0.8, "collectors act at random (reward-free data): probability that a step keeps "
                                      "the previous random action, so runs go straight and cross rooms", ge=0, lt=1)
 
@@ -64,3 +68,6 @@ class JepaConfig:
             self.planner.validate()
         except ValueError as err:
             raise ValueError(f"algo.{err}") from None
+        if self.step_cost and self.goal_cost != "min":  # a constant under last and sum: it would change nothing
+            raise ValueError(f"algo.step_cost ({self.step_cost}) only acts with algo.goal_cost: min, not "
+                             f"{self.goal_cost!r}; set algo.step_cost=0 with it")

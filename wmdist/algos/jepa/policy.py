@@ -87,8 +87,8 @@ class JepaPolicy(Policy):
         if self.cfg.planner.warm_start and self.plan is not None:
             init = shift_plan(self.plan, low, high)
             init[restart] = 0.0
-        result = cem_plan(goal_distance_fn(self.model, self.z_hist, self.a_past, z_goal, self.cfg.goal_cost), low, high,
-                          self.cfg.planner, self.generator, init)
+        score = goal_distance_fn(self.model, self.z_hist, self.a_past, z_goal, self.cfg.goal_cost, self.cfg.step_cost)
+        result = cem_plan(score, low, high, self.cfg.planner, self.generator, init)
         action = result.action  # [E, A]
         self.plan, self.plan_from = result.mean, (self.z_hist, self.a_past)
         if h > 1:
