@@ -6,6 +6,8 @@ from dataclasses import dataclass
 from wmdist.config.fields import MAX_LAYERS, param, section
 from wmdist.search.cem import CEMConfig
 
+GOAL_COSTS = ("last", "sum", "min")  # the planning costs of wmdist/algos/jepa/planning.py
+
 
 @dataclass
 class JepaConfig:
@@ -55,7 +57,7 @@ class JepaConfig:
     goal_cost: str = param("last", "planning cost: last = squared distance of the last predicted embedding to the goal's "
                                    "(LeWM); sum = summed over every predicted step (fixes the first action); min = the "
                                    "closest approach over the horizon",
-                           choices=("last", "sum", "min"))
+                           choices=GOAL_COSTS)
     step_cost: float = param(0.0, "with goal_cost min: added per imagined step before the minimum, min_k (d_k + "
                                   "step_cost x k), so of two plans that reach the goal the earlier one wins (a shorter "
                                   "path, not a detour); in units of squared embedding distance", ge=0)

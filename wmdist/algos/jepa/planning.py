@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import torch
 
+from wmdist.algos.jepa.config import GOAL_COSTS
 from wmdist.algos.jepa.model import JepaModel
 from wmdist.search.cem import ScoreFn
 
@@ -48,7 +49,7 @@ def goal_distance_fn(model: JepaModel,
                      ) -> ScoreFn:
     """A score function actions [E, J, H, A] -> -||z_{t+H} - z_goal||^2 (or -sum_k ||z_{t+k} - z_goal||^2, or
     -min_k (||z_{t+k} - z_goal||^2 + step_cost k)) [E, J]."""
-    if cost not in ("last", "sum", "min"):
+    if cost not in GOAL_COSTS:
         raise ValueError(f"goal cost must be 'last', 'sum' or 'min', got {cost!r}")
 
     @torch.no_grad()
