@@ -2,7 +2,8 @@
 
 Both plan with the same CEM settings (the JEPA preset's, configs/jepa_nav_tworooms.yaml) from
 the same [E, 64, 64, 6] observations, through each policy's whole greedy `act` (encode, then
-CEM): JEPA rolls its MLP predictor and scores the distance to the goal image's embedding;
+CEM): JEPA rolls its MLP predictor and scores the distance to the goal image's embedding (with
+the preset's waypoint graph: the nearest node, and a shortest-path search once per goal);
 PlaNet filters the frame through its RSSM (the pixel preset's sizes: GRU 200, Gaussian 30,
 conv depth 32) and scores predicted rewards. Weights are random (the cost does not depend on
 them), one torch thread. `ms_per_decision` = wall time / (E x calls); `*_cpu` = this thread's
@@ -38,6 +39,10 @@ def _policies() -> dict[str, Policy]:
         weights = algo.make_learner().get_weights()
         if name == "jepa":
             weights["jepa.updates"] = np.asarray(1, np.int64)  # planning needs weights from an update
+            if cfg.algo.graph_pairs:  # the preset's waypoint graph, of its size (random nodes: the cost is the same)
+                rng = np.random.default_rng(0)
+                nodes = rng.normal(size=(2 * cfg.algo.graph_pairs, cfg.algo.embed_dim))  # [2P, D]
+                weights["jepa.graph"] = nodes.astype(np.float32)
         policy.set_weights(weights, 1)
         out[name] = policy
     return out
@@ -72,6 +77,7 @@ def run(quick: bool = False) -> Iterator[dict]:
                 r = time_policy(policy, obs, 0.5 if quick else 5.0, 1 if quick else 2)
                 yield {"case": f"{name}_E{envs}", "algo": name, "envs": envs, "horizon": planner.horizon,
                        "candidates": planner.candidates, "top_k": planner.top_k, "iterations": planner.iterations,
+                       "graph_nodes": 0 if getattr(policy, "graph", None) is None else len(policy.graph.nodes),
                        **{k: round(v, 3) for k, v in r.items()}, "threads": 1}
     finally:
         torch.set_num_threads(threads)

@@ -61,6 +61,17 @@ class JepaConfig:
     step_cost: float = param(0.0, "with goal_cost min: added per imagined step before the minimum, min_k (d_k + "
                                   "step_cost x k), so of two plans that reach the goal the earlier one wins (a shorter "
                                   "path, not a detour); in units of squared embedding distance", ge=0)
+    graph_pairs: int = param(0, "transitions (two consecutive real frames) of the latest batches whose embeddings the "
+                                "learner publishes with the weights: the nodes of a graph on which the planner finds "
+                                "waypoints toward far goals (Search on the Replay Buffer, waypoints.py); 0 = plan "
+                                "straight to the goal (LeWM)", ge=0)
+    graph_knn: int = param(5, "links from each graph node to its nearest nodes in embedding space", ge=0)
+    graph_link: float = param(2.0, "the longest such link, in median steps. A fold of the embedding can put frames on "
+                                   "either side of a wall 0.3 steps apart (a shortcut), but a cut-off that tight "
+                                   "splits the graph: 0.3 planned to 66% of 100 goals where 2 did 80% (BENCHMARKS.md)",
+                           gt=0)
+    waypoint_steps: float = param(6.0, "with a graph: plan toward the node this many steps along the shortest path to "
+                                       "the goal, or to the goal itself once it is nearer", gt=0)
     explore_keep: float = param(0.8, "collectors act at random (reward-free data): probability that a step keeps "
                                      "the previous random action, so runs go straight and cross rooms", ge=0, lt=1)
 

@@ -21,7 +21,7 @@ import torch
 
 from wmdist.algos.base import Batch, Learner, NonFiniteLoss, UpdateResult, Weights
 from wmdist.algos.jepa.config import JepaConfig
-from wmdist.algos.jepa.model import FRAME_CHANNELS, JepaModel, model_weights, recalibrate_batchnorm
+from wmdist.algos.jepa.model import FRAME_CHANNELS, GRAPH_KEY, JepaModel, model_weights, recalibrate_batchnorm
 from wmdist.algos.jepa.planning import rollout
 from wmdist.algos.jepa.sigreg import effective_rank, random_directions, sigreg
 from wmdist.envs.spec import EnvSpec
@@ -51,6 +51,7 @@ class JepaLearner(Learner):
         self.generator = seeded_generator(self.device, seed)
         self.updates = 0
         self._frames: deque[torch.Tensor] = deque()  # the latest batches' real frames, [N_i, 64, 64, 3] uint8 each
+        self._pairs: deque[torch.Tensor] = deque()  # their transitions, [P_i, 2, 64, 64, 3] uint8 each (graph_pairs)
 
     def loss(self, batch: Batch) -> tuple[torch.Tensor, dict[str, float]]:
         """The JEPA loss of one batch and its parts (floats) for logging."""
@@ -110,6 +111,31 @@ class JepaLearner(Learner):
         while held - self._frames[0].shape[0] >= self.cfg.bn_frames:
             held -= self._frames.popleft().shape[0]
 
+    def _keep_pairs(self, batch: Batch) -> None:
+        """Hold the batch's transitions (frames t and t + 1, both real); the latest `graph_pairs` of them."""
+        mask = np.asarray(batch["mask"]) > 0  # [B, T]
+        b, t = np.nonzero(mask[:, :-1] & mask[:, 1:])  # [P] each: step t and its successor are real
+        frames = np.asarray(batch["obs"])[..., :FRAME_CHANNELS]  # [B, T, 64, 64, 3]
+        self._pairs.append(torch.as_tensor(np.stack([frames[b, t], frames[b, t + 1]], 1), device=self.device))
+        held = sum(p.shape[0] for p in self._pairs)
+        while held - self._pairs[0].shape[0] >= self.cfg.graph_pairs:
+            held -= self._pairs.popleft().shape[0]
+
+    @torch.no_grad()
+    def graph_nodes(self, model: JepaModel) -> np.ndarray | None:
+        """The held transitions' embeddings under `model` (eval mode, as planning embeds): [2P, D], rows
+        2i -> 2i+1 one real step (None without graph_pairs or before any update)."""
+        if not self._pairs:
+            return None
+        pairs = torch.cat(list(self._pairs))[-self.cfg.graph_pairs:]  # [P, 2, 64, 64, 3]
+        was_training = model.training
+        model.eval()
+        try:
+            z = torch.cat([model.encode(chunk) for chunk in pairs.flatten(0, 1).split(1024)])  # [2P, D]
+        finally:
+            model.train(was_training)
+        return z.float().cpu().numpy()
+
     @property
     def recent(self) -> torch.Tensor | None:
         """The latest `bn_frames` real frames [<= bn_frames, 64, 64, 3] (None before any update or with bn_frames 0)."""
@@ -127,6 +153,8 @@ class JepaLearner(Learner):
             polyak_(self.ema_model, self.model, 1.0 - self.cfg.publish_ema, copy_buffers=False)
         if self.cfg.bn_frames:
             self._keep_frames(batch)
+        if self.cfg.graph_pairs:
+            self._keep_pairs(batch)
         self.updates += 1
         return UpdateResult(metrics=metrics)
 
@@ -135,7 +163,11 @@ class JepaLearner(Learner):
         recent = self.recent
         if recent is not None:  # the statistics planning uses, for exactly these weights
             recalibrate_batchnorm(published, recent)
-        return model_weights(published, self.updates)
+        out = model_weights(published, self.updates)
+        nodes = self.graph_nodes(published)
+        if nodes is not None:
+            out[GRAPH_KEY] = nodes
+        return out
 
     def state_dict(self) -> dict[str, Any]:
         return {"model": self.model.state_dict(), "opt": self.opt.state_dict(), "generator": self.generator.get_state(),

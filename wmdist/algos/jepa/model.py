@@ -17,6 +17,7 @@ from wmdist.nets.mlp import ACTIVATIONS, mlp
 
 FRAME_CHANNELS = 3  # one RGB frame; an observation is the current frame then the goal image
 UPDATES_KEY = "jepa.updates"  # extra entry of the published weights: learner updates behind them
+GRAPH_KEY = "jepa.graph"  # extra entry with algo.graph_pairs: [2P, D] embeddings, rows 2i -> 2i+1 one real step
 
 
 class Projector(nn.Module):
@@ -106,6 +107,6 @@ def model_weights(model: JepaModel, updates: int) -> Weights:
 
 def load_model(model: JepaModel, weights: Weights) -> int:
     """Load a snapshot into `model`; returns the learner updates behind it."""
-    state = {k: torch.as_tensor(np.array(v)) for k, v in weights.items() if k != UPDATES_KEY}
+    state = {k: torch.as_tensor(np.array(v)) for k, v in weights.items() if k not in (UPDATES_KEY, GRAPH_KEY)}
     model.load_state_dict(state)
     return int(weights.get(UPDATES_KEY, 0))

@@ -4,7 +4,9 @@ Collecting (explore=True): reward-free exploration data, uniform random actions,
 keeping the previous one with probability `explore_keep` (straight runs that cross rooms);
 no model is used. Evaluating (explore=False): embed the frame and the goal image, then plan
 toward the goal with CEM at every step (MPC, the plan's first action is taken), for all E
-envs in one batched call. Planning with weights that no update produced is refused.
+envs in one batched call; with a transition graph in the weights (`graph_pairs`), toward
+a waypoint on the graph's shortest path to the goal (`waypoints.py`). Planning with weights
+that no update produced is refused.
 """
 from __future__ import annotations
 
@@ -13,8 +15,9 @@ import torch
 
 from wmdist.algos.base import Policy, Weights
 from wmdist.algos.jepa.config import JepaConfig
-from wmdist.algos.jepa.model import JepaModel, load_model
+from wmdist.algos.jepa.model import GRAPH_KEY, JepaModel, load_model
 from wmdist.algos.jepa.planning import goal_distance_fn
+from wmdist.algos.jepa.waypoints import TransitionGraph
 from wmdist.envs.spec import EnvSpec
 from wmdist.nets.actions import action_to_env
 from wmdist.nets.generator import seeded_generator
@@ -44,10 +47,14 @@ class JepaPolicy(Policy):
         self.plan: torch.Tensor | None = None  # [E, H, A]
         self.plan_from: tuple[torch.Tensor, torch.Tensor] | None = None  # the last plan's (z_hist, a_past)
         self.explore_action: np.ndarray | None = None  # [E, A] model space
+        self.graph_nodes: np.ndarray | None = None  # [2P, D] the published transitions' embeddings
+        self.graph: TransitionGraph | None = None  # built from them at the first plan (collectors never need it)
 
     def set_weights(self, weights: Weights, version: int) -> None:
         self.trained_updates = load_model(self.model, weights)
         self.version = version
+        self.graph_nodes = np.asarray(weights[GRAPH_KEY]) if GRAPH_KEY in weights else None
+        self.graph = None
 
     def _explore(self, e: int, first: np.ndarray) -> np.ndarray:
         a_dim = self.spec.action_dim
@@ -69,6 +76,10 @@ class JepaPolicy(Policy):
             raise ValueError(f"jepa: cannot plan to a goal before any training (weights v{self.version} come from "
                              "0 learner updates)")
         z, z_goal = self.model.encode_obs(torch.as_tensor(obs, device=self.device))  # [E, D] each
+        if self.graph_nodes is not None:  # a far goal: plan toward a waypoint on the replay graph instead
+            if self.graph is None:
+                self.graph = TransitionGraph(self.graph_nodes, self.cfg.graph_knn, self.cfg.graph_link)
+            z_goal = self.graph.waypoints(z, z_goal, self.cfg.waypoint_steps)
         h, a_dim = self.cfg.history, self.spec.action_dim
         restart = torch.as_tensor(np.asarray(first, bool), device=self.device)  # [E]
         if self.z_hist is None or self.z_hist.shape[0] != e:
