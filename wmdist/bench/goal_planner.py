@@ -25,6 +25,7 @@ PRESET = Path(__file__).parents[2] / "configs" / "jepa_nav_tworooms.yaml"
 
 def _policies() -> dict[str, Policy]:
     from wmdist.algos.jepa import Jepa
+    from wmdist.algos.jepa.model import GRAPH_KEY, UPDATES_KEY
     from wmdist.algos.planet import PlaNet, PlaNetConfig
     from wmdist.config.loader import load_config
     from wmdist.envs.factory import env_spec
@@ -38,11 +39,11 @@ def _policies() -> dict[str, Policy]:
         policy = algo.make_policy()
         weights = algo.make_learner().get_weights()
         if name == "jepa":
-            weights["jepa.updates"] = np.asarray(1, np.int64)  # planning needs weights from an update
+            weights[UPDATES_KEY] = np.asarray(1, np.int64)  # planning needs weights from an update
             if cfg.algo.graph_pairs:  # the preset's waypoint graph, of its size (random nodes: the cost is the same)
                 rng = np.random.default_rng(0)
                 nodes = rng.normal(size=(2 * cfg.algo.graph_pairs, cfg.algo.embed_dim))  # [2P, D]
-                weights["jepa.graph"] = nodes.astype(np.float32)
+                weights[GRAPH_KEY] = nodes.astype(np.float32)
         policy.set_weights(weights, 1)
         out[name] = policy
     return out

@@ -39,6 +39,19 @@ def history_windows(x: torch.Tensor, h: int) -> torch.Tensor:
     return x.unfold(1, h, 1)[:, : x.shape[1] - h].movedim(-1, 2)
 
 
+def hold_latest(held: deque[torch.Tensor], rows: torch.Tensor, keep: int) -> None:
+    """Append a chunk of rows to `held`; drop whole older chunks the latest `keep` rows no longer need."""
+    held.append(rows)
+    total = sum(x.shape[0] for x in held)
+    while total - held[0].shape[0] >= keep:
+        total -= held.popleft().shape[0]
+
+
+def latest(held: deque[torch.Tensor], keep: int) -> torch.Tensor | None:
+    """The latest `keep` rows of `held`'s chunks (None while it is empty)."""
+    return torch.cat(list(held))[-keep:] if held else None
+
+
 class JepaLearner(Learner):
     def __init__(self, cfg: JepaConfig, spec: EnvSpec, device: str = "cpu", seed: int = 0) -> None:
         self.cfg, self.spec, self.device = cfg, spec, torch.device(device)
@@ -106,28 +119,24 @@ class JepaLearner(Learner):
     def _keep_frames(self, batch: Batch) -> None:
         """Hold the batch's real frames; drop whole older batches the latest `bn_frames` no longer need."""
         real = np.asarray(batch["mask"]) > 0  # [B, T]
-        self._frames.append(torch.as_tensor(np.asarray(batch["obs"])[..., :FRAME_CHANNELS][real], device=self.device))
-        held = sum(f.shape[0] for f in self._frames)
-        while held - self._frames[0].shape[0] >= self.cfg.bn_frames:
-            held -= self._frames.popleft().shape[0]
+        frames = torch.as_tensor(np.asarray(batch["obs"])[..., :FRAME_CHANNELS][real], device=self.device)
+        hold_latest(self._frames, frames, self.cfg.bn_frames)
 
     def _keep_pairs(self, batch: Batch) -> None:
         """Hold the batch's transitions (frames t and t + 1, both real); the latest `graph_pairs` of them."""
         mask = np.asarray(batch["mask"]) > 0  # [B, T]
         b, t = np.nonzero(mask[:, :-1] & mask[:, 1:])  # [P] each: step t and its successor are real
         frames = np.asarray(batch["obs"])[..., :FRAME_CHANNELS]  # [B, T, 64, 64, 3]
-        self._pairs.append(torch.as_tensor(np.stack([frames[b, t], frames[b, t + 1]], 1), device=self.device))
-        held = sum(p.shape[0] for p in self._pairs)
-        while held - self._pairs[0].shape[0] >= self.cfg.graph_pairs:
-            held -= self._pairs.popleft().shape[0]
+        pairs = torch.as_tensor(np.stack([frames[b, t], frames[b, t + 1]], 1), device=self.device)  # [P, 2, ...]
+        hold_latest(self._pairs, pairs, self.cfg.graph_pairs)
 
     @torch.no_grad()
     def graph_nodes(self, model: JepaModel) -> np.ndarray | None:
         """The held transitions' embeddings under `model` (eval mode, as planning embeds): [2P, D], rows
         2i -> 2i+1 one real step (None without graph_pairs or before any update)."""
-        if not self._pairs:
+        pairs = latest(self._pairs, self.cfg.graph_pairs)  # [P, 2, 64, 64, 3]
+        if pairs is None:
             return None
-        pairs = torch.cat(list(self._pairs))[-self.cfg.graph_pairs:]  # [P, 2, 64, 64, 3]
         was_training = model.training
         model.eval()
         try:
@@ -139,9 +148,7 @@ class JepaLearner(Learner):
     @property
     def recent(self) -> torch.Tensor | None:
         """The latest `bn_frames` real frames [<= bn_frames, 64, 64, 3] (None before any update or with bn_frames 0)."""
-        if not self._frames:
-            return None
-        return torch.cat(list(self._frames))[-self.cfg.bn_frames:]
+        return latest(self._frames, self.cfg.bn_frames)
 
     # --- Learner API ----------------------------------------------------------------
     def update(self, batch: Batch) -> UpdateResult:
