@@ -49,7 +49,7 @@ def test_shard_calls_are_rare_and_sent_ahead_of_need(sizes):
         assert len(got[0]) == len(got[1]) == len(got[4]) == B and got[5] == sum(sizes)
         shard_of.append(got[0])
     S = len(sizes)
-    calls = N * S / 16 * 1.25 + 2 * S  # about one call per shard per 16 takes
+    calls = N / 16 * 1.25 + 2 * S  # about one call per 16 takes for the union, however many shards
     assert len(shards.sent) <= calls and pools.fetches <= calls
     assert pools.fetches <= N / 16 * 1.25 + 2  # the shards' requests go together: one fetch reads them all
     assert min(shards.leads[2 * S:]) >= 8  # once warm, each request waited for was sent 8+ takes earlier

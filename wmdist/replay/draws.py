@@ -17,6 +17,9 @@ import numpy as np
 
 
 class DrawPool:
+    """One shard's draws not yet taken: arrays [n] whose first `head` entries are spent (a
+    take moves `head` and returns views, so it costs O(k), not a copy of the whole stock)."""
+
     def __init__(self) -> None:
         self.clear()
 
@@ -27,6 +30,7 @@ class DrawPool:
         self.newer = np.zeros(0, np.int64)  # [n] real steps its shard placed after the draw's window
         self.keys: list[str] = []  # [n] record keys
         self.born = np.zeros(0, np.float64)  # [n] when each draw arrived (monotonic seconds)
+        self.head = 0  # draws [0, head) are spent
         self.size = 0  # the shard's sequences at its latest report
         self.total = 0.0  # the shard's sampling mass at its latest report
         self.reported_at = -math.inf  # when the request that brought that report was sent
@@ -36,36 +40,35 @@ class DrawPool:
         return self.reported_at > -math.inf
 
     def __len__(self) -> int:
-        return int(self.slots.size)
+        return self.slots.size - self.head
 
     def add(self, draw: dict, now: float = 0.0) -> None:
         """Append a `ReplayShard.draw` result asked for at `now`; its size and mass become
         the latest report."""
-        self.born = np.concatenate([self.born, np.full(len(draw["slots"]), now)])
-        self.slots = np.concatenate([self.slots, np.asarray(draw["slots"], np.int64)])
-        self.stamps = np.concatenate([self.stamps, np.asarray(draw["stamps"], np.int64)])
-        self.mass = np.concatenate([self.mass, np.asarray(draw["mass"], np.float64)])
+        h, k = self.head, len(draw["slots"])
+        self.born = np.concatenate([self.born[h:], np.full(k, now)])
+        self.slots = np.concatenate([self.slots[h:], np.asarray(draw["slots"], np.int64)])
+        self.stamps = np.concatenate([self.stamps[h:], np.asarray(draw["stamps"], np.int64)])
+        self.mass = np.concatenate([self.mass[h:], np.asarray(draw["mass"], np.float64)])
         newer = draw.get("newer")
-        self.newer = np.concatenate([self.newer, np.zeros(len(draw["slots"]), np.int64) if newer is None
+        self.newer = np.concatenate([self.newer[h:], np.zeros(k, np.int64) if newer is None
                                      else np.asarray(newer, np.int64)])
-        self.keys += list(draw["keys"])
+        self.keys = self.keys[h:] + list(draw["keys"])
+        self.head = 0
         self.size, self.total, self.reported_at = int(draw["size"]), float(draw["total"]), now
 
     def expire(self, before: float) -> None:
         """Drop draws that arrived before `before` (a slow reader should not see old draws)."""
-        n = int(np.searchsorted(self.born, before))  # arrival times are non-decreasing
-        if n:
-            self.take(n)
+        if self.head < self.born.size and self.born[self.head] < before:  # arrival times never decrease
+            self.head = int(np.searchsorted(self.born, before))
 
     def take(self, k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[str], np.ndarray]:
         """The oldest k draws -> (slots, stamps, mass, keys, newer); they leave the pool."""
         if k > len(self):
             raise ValueError(f"draw pool holds {len(self)} draws, {k} asked")
-        out = self.slots[:k], self.stamps[:k], self.mass[:k], self.keys[:k], self.newer[:k]
-        self.slots, self.stamps, self.mass, self.keys = self.slots[k:], self.stamps[k:], self.mass[k:], self.keys[k:]
-        self.newer = self.newer[k:]
-        self.born = self.born[k:]
-        return out
+        a, b = self.head, self.head + k
+        self.head = b
+        return self.slots[a:b], self.stamps[a:b], self.mass[a:b], self.keys[a:b], self.newer[a:b]
 
 
 def is_weights(mass: np.ndarray, size: int, total: float, beta: float) -> np.ndarray:
@@ -82,11 +85,13 @@ class DrawPools:
     Ray-free: `send(shard, k)` starts a request for k draws and returns a handle, `fetch(handles)`
     blocks for their results (`ReplayShard.draw` dicts). `take(B)` is served from the pools;
     a shard call sits on its path only when a pool runs short, and then it is usually the
-    request sent ahead, back long since. With `prefetch`, a pool below `ahead * B * share`
+    request sent ahead, back long since. With `prefetch`, a pool below `S * ahead * B * share`
     draws (share: the shard's part of the union's mass) gets one request for that many, so
-    each shard is called about once per `ahead` takes, that many takes before its draws are
-    needed; the other shards' pools below twice that are asked at the same time, and a
-    fetch reads every request sent with the one it waits for (one fetch per refill, not S).
+    each shard is called about once per `S * ahead` takes, at least `ahead` takes before its
+    draws are needed, and the union about once per `ahead` takes however many shards it has
+    (a shard call costs the reader ~0.1 ms, as much as the rest of a vector sample); the
+    other shards' pools below twice that are asked at the same time, and a fetch reads
+    every request sent with the one it waits for (one fetch per refill, not S).
     Draws count as born when their request was sent; older than `max_age` they are dropped
     (so a slow reader sees fresh contents)."""
 
@@ -120,7 +125,14 @@ class DrawPools:
                 return None
         for _ in range(100):
             totals = [p.total for p in pools]
-            counts = [B] if S == 1 else rng.multinomial(B, np.array(totals) / sum(totals)).tolist()
+            total = float(sum(totals))
+            if S == 1:
+                counts = [B]
+            elif S == 2:  # the two-way multinomial, at a third of its cost
+                k0 = int(rng.binomial(B, totals[0] / total))
+                counts = [k0, B - k0]
+            else:
+                counts = rng.multinomial(B, np.array(totals) / total).tolist()
             short = [s for s in range(S) if len(pools[s]) < counts[s]]
             if not short:
                 break
@@ -129,10 +141,10 @@ class DrawPools:
                 return None
         else:
             raise RuntimeError("replay: shards kept returning too few draws")
-        n, total = sum(p.size for p in pools), float(sum(totals))
+        n = sum(p.size for p in pools)
         taken = [(s, pools[s].take(k)) for s, k in enumerate(counts) if k > 0]
         if prefetch:  # read back by a later take, so it is there in time
-            want = [max(B, math.ceil(self.ahead * B * p.total / total)) for p in pools]
+            want = [max(B, math.ceil(S * self.ahead * B * p.total / total)) for p in pools]
             if any(len(p) < w and s not in self.inflight for s, (p, w) in enumerate(zip(pools, want))):
                 # one pool runs low: every shard not asked yet and below twice its share is asked
                 # now too, so their answers come back together and one fetch reads them all
@@ -142,10 +154,10 @@ class DrawPools:
         if len(taken) == 1:  # one shard: its arrays as they are
             s, (slots, stamps, mass, keys, newer) = taken[0]
             return np.full(B, s, np.int64), slots, stamps, mass, keys, n, total, newer
-        shard_of = np.concatenate([np.full(len(t[0]), s, np.int64) for s, t in taken])
-        slots, stamps, mass = (np.concatenate([t[i] for _, t in taken]) for i in range(3))
-        newer = np.concatenate([t[4] for _, t in taken])
-        return shard_of, slots, stamps, mass, [k for _, t in taken for k in t[3]], n, total, newer
+        shard_of = np.repeat(np.array([s for s, _ in taken], np.int64), [len(t[0]) for _, t in taken])
+        slots, stamps, mass, newer = (np.concatenate([t[i] for _, t in taken]) for i in (0, 1, 2, 4))
+        keys = [k for _, t in taken for k in t[3]] if taken[0][1][3] else []
+        return shard_of, slots, stamps, mass, keys, n, total, newer
 
     def _fill(self, shards, k: int, fresh: bool = False) -> None:
         """Add each shard's request in flight to its pool (waiting for it), or, with `fresh`,
