@@ -166,15 +166,18 @@ def _cases(kind: str, shard_counts: list[int], quick: bool, run_dir: str) -> lis
         gc.disable()
         for k in [*clients, *raws, "raw_redis_get"]:
             ins[k], smp[k] = [], []
+        order = list(clients.items())
         for i in range(reps):
-            for key, c in clients.items():
+            # each round starts one service later, so no service always follows the same one (what
+            # ran just before decides how warm the caches are: a fixed order biases the ratios)
+            for key, c in order[i % len(order):] + order[:i % len(order)]:
                 ins[key].append(_time(lambda: c.insert(batches[i], source_id=i)))
             for k, raw in raws.items():
                 ins[k].append(_time(lambda: raw.put(batches[i], i)))
         stats = {key: c.stats() for key, c in clients.items()}
         used = {key: r.info("memory")["used_memory"] - used[key] for key, r in servers.items()}
         for i in range(reps):
-            for key, c in clients.items():
+            for key, c in order[i % len(order):] + order[:i % len(order)]:
                 smp[key].append(_time(lambda: c.sample(sample_b)))
             for k, raw in raws.items():
                 smp[k].append(_time(lambda: raw.get(sample_b, i)))
