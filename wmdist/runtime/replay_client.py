@@ -60,9 +60,10 @@ def route(source_id: int, episode_id: np.ndarray, shards: int) -> np.ndarray:
     return (h % np.uint64(shards)).astype(np.int64)
 
 
-# redis: each shard is asked for about this many samples' worth of draws at a time, that many
-# samples before they are needed (a shard call costs ~1 ms of this process's time and can take
-# 10+ ms to come back on a loaded machine)
+# drawn paths (redis, shared memory): each shard is asked for its share of S x this many samples'
+# worth of draws at a time, at least this many samples before they are needed, so the union of
+# shards costs one call per this many samples (a shard call costs ~1 ms of this process's time and
+# can take 10+ ms to come back on a loaded machine)
 PREFETCH_SAMPLES = 16
 MAX_DRAW_AGE = 1.0  # seconds: older draws are dropped, so a slow reader sees fresh contents
 
