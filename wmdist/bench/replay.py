@@ -124,6 +124,14 @@ class _RawRedis:
 VARIANTS = (("memory", "memory", True), ("memory-actor", "memory", False), ("redis", "redis", True))
 
 
+def _rotated(items: list, i: int) -> list:
+    """`items` starting at position i (mod len): round i of the timing loops starts one service
+    later, so no service always follows the same one (what ran just before decides how warm the
+    caches are: a fixed order biases the ratios)."""
+    k = i % len(items)
+    return items[k:] + items[:k]
+
+
 def _cases(kind: str, shard_counts: list[int], quick: bool, run_dir: str) -> list[dict]:
     """Every variant at every shard count on the same batches, their rounds interleaved (so
     load hits all alike): one row per service, one row of ratios per shard count, and one of
@@ -166,18 +174,15 @@ def _cases(kind: str, shard_counts: list[int], quick: bool, run_dir: str) -> lis
         gc.disable()
         for k in [*clients, *raws, "raw_redis_get"]:
             ins[k], smp[k] = [], []
-        order = list(clients.items())
         for i in range(reps):
-            # each round starts one service later, so no service always follows the same one (what
-            # ran just before decides how warm the caches are: a fixed order biases the ratios)
-            for key, c in order[i % len(order):] + order[:i % len(order)]:
+            for key, c in _rotated(list(clients.items()), i):
                 ins[key].append(_time(lambda: c.insert(batches[i], source_id=i)))
             for k, raw in raws.items():
                 ins[k].append(_time(lambda: raw.put(batches[i], i)))
         stats = {key: c.stats() for key, c in clients.items()}
         used = {key: r.info("memory")["used_memory"] - used[key] for key, r in servers.items()}
         for i in range(reps):
-            for key, c in order[i % len(order):] + order[:i % len(order)]:
+            for key, c in _rotated(list(clients.items()), i):
                 smp[key].append(_time(lambda: c.sample(sample_b)))
             for k, raw in raws.items():
                 smp[k].append(_time(lambda: raw.get(sample_b, i)))

@@ -126,13 +126,7 @@ class DrawPools:
         for _ in range(100):
             totals = [p.total for p in pools]
             total = float(sum(totals))
-            if S == 1:
-                counts = [B]
-            elif S == 2:  # the two-way multinomial, at a third of its cost
-                k0 = int(rng.binomial(B, totals[0] / total))
-                counts = [k0, B - k0]
-            else:
-                counts = rng.multinomial(B, np.array(totals) / total).tolist()
+            counts = [B] if S == 1 else rng.multinomial(B, np.array(totals) / total).tolist()
             short = [s for s in range(S) if len(pools[s]) < counts[s]]
             if not short:
                 break
@@ -156,8 +150,7 @@ class DrawPools:
             return np.full(B, s, np.int64), slots, stamps, mass, keys, n, total, newer
         shard_of = np.repeat(np.array([s for s, _ in taken], np.int64), [len(t[0]) for _, t in taken])
         slots, stamps, mass, newer = (np.concatenate([t[i] for _, t in taken]) for i in (0, 1, 2, 4))
-        keys = [k for _, t in taken for k in t[3]] if taken[0][1][3] else []
-        return shard_of, slots, stamps, mass, keys, n, total, newer
+        return shard_of, slots, stamps, mass, [k for _, t in taken for k in t[3]], n, total, newer
 
     def _fill(self, shards, k: int, fresh: bool = False) -> None:
         """Add each shard's request in flight to its pool (waiting for it), or, with `fresh`,
