@@ -5,9 +5,11 @@
 Plays episodes with the run's latest checkpoint (the actor's mode unless --explore) and prints one
 JSON line per episode: its length, how it ended (`x`: the cart left the track, |x| > 2.4; `angle`: the
 pole fell past 12 degrees; `limit`: 500 steps), the furthest the cart got and the side it drifted to.
-A last line gives the critic's mean value over every step, binned by |x|. A critic that cannot tell a
-cart resting near the edge from a centred one gives flat bins; the actor then has no reason to
-re-centre the cart, and a version that drifts a little further ends its episodes at the edge.
+Each ended episode also gives `cont_at_end`, the world model's continue probability at its terminal
+observation. A last line gives the critic's mean value over every step, binned by |x|, and the ends
+of the episodes in the checkpoint's replay (what the world model learned terminations from). A model
+whose replay holds no cart-off-the-track ends predicts ~1 there, its imagination never ends an
+episode at the edge, the critic's bins stay flat, and the actor has no reason to re-centre the cart.
 """
 from __future__ import annotations
 
@@ -41,6 +43,29 @@ def _critic(algo, policy, ckpt):
     return lambda h, z: ac.critic({"h": h, "z": z})["critic"].float().squeeze(-1)
 
 
+def _ends(obs: np.ndarray, terminal: np.ndarray) -> dict[str, int]:
+    """Terminal observations [n, 4] by cause: the cart off the track, else the pole fallen."""
+    x_end = np.abs(obs[terminal, 0]) > X_LIMIT
+    return {"x": int(x_end.sum()), "angle": int((~x_end).sum())}
+
+
+def replay_ends(ckpt) -> dict | None:
+    """How the episodes stored in a checkpoint's in-memory replay ended (None: no readable rows there,
+    e.g. the redis backend keeps its records in redis)."""
+    total: dict[str, int] = {"x": 0, "angle": 0, "steps": 0}
+    found = False
+    for f in sorted((ckpt / "replay").glob("shard*.npz")):
+        with np.load(f, allow_pickle=False) as d:  # stored data is never unpickled
+            if not {"f_obs", "f_terminal", "mask"} <= set(d.files):
+                continue
+            found = True
+            valid = d["mask"].astype(bool)  # [N, T]
+            for k, v in _ends(d["f_obs"], d["f_terminal"].astype(bool) & valid).items():
+                total[k] += v
+            total["steps"] += int(valid.sum())
+    return total if found else None
+
+
 def probe(run_dir: str, episodes: int, explore: bool = False, seed: int = 1000) -> Iterator[dict]:
     """One dict per episode, then the value summary (see the module docstring)."""
     from wmdist.runtime.evaluate import load_run
@@ -56,7 +81,7 @@ def probe(run_dir: str, episodes: int, explore: bool = False, seed: int = 1000) 
     env = make_env(cfg.env, seed)
     xs, values = [], []  # every step of every episode: |x| [n] and the critic's value [n]
     for ep in range(episodes):
-        obs, first, steps, max_x, end = env.reset(seed + ep), True, 0, 0.0, "limit"
+        obs, first, steps, max_x, end, cont_end = env.reset(seed + ep), True, 0, 0.0, "limit", None
         path = []
         while True:
             action, _ = policy.act(obs[None], np.array([first]), None, None, explore)
@@ -69,11 +94,17 @@ def probe(run_dir: str, episodes: int, explore: bool = False, seed: int = 1000) 
             max_x = max(max_x, abs(float(obs[0])))
             if terminated:
                 end = "x" if abs(float(obs[0])) > X_LIMIT else "angle"
+            if terminated and policy.cfg.cont_head:
+                with torch.no_grad():  # the terminal observation through the filter, as replay trains on it
+                    h, z = policy.wm.filter_step(policy.h, policy.z, policy.prev_action, torch.as_tensor(obs[None]),
+                                                 torch.ones(1, 1), policy.generator)
+                    cont_end = float(torch.sigmoid(policy.wm.heads({"h": h, "z": z}, upto="cont")["cont"].float()).reshape(-1)[0])
             if terminated or truncated:
                 break
         drift = float(np.mean(path[len(path) // 2:]))  # where the second half of the episode was spent
         yield {"episode": ep, "length": steps, "end": end, "max_abs_x": round(max_x, 3),
-               "side": "right" if drift > 0 else "left", "mean_x_second_half": round(drift, 3)}
+               "side": "right" if drift > 0 else "left", "mean_x_second_half": round(drift, 3),
+               "cont_at_end": None if cont_end is None else round(cont_end, 4)}
     env.close()
     x, v = np.asarray(xs), np.asarray(values)
     bins = []
@@ -82,7 +113,7 @@ def probe(run_dir: str, episodes: int, explore: bool = False, seed: int = 1000) 
         bins.append({"abs_x": f"{lo}-{hi}", "steps": int(sel.sum()),
                      "mean_value": round(float(v[sel].mean()), 2) if sel.any() else None})
     yield {"summary": True, "run_version": version, "explore": explore, "episodes": episodes,
-           "value_by_abs_x": bins}
+           "value_by_abs_x": bins, "replay_ends": replay_ends(ckpt)}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -101,6 +132,8 @@ def main(argv: list[str] | None = None) -> int:
     except ConfigError as err:
         print(f"wmdist: error: {err}", file=sys.stderr)
         return 2
+    except BrokenPipeError:  # piped into head: the reader has what it wanted
+        sys.stderr.close()
     return 0
 
 
