@@ -27,7 +27,7 @@ X_LIMIT = 2.4  # gymnasium CartPole-v1: the episode terminates once |x| exceeds 
 X_BINS = (0.0, 0.5, 1.0, 1.5, 2.0, X_LIMIT)  # |x| edges of the value summary
 
 
-def _critic(algo, policy, ckpt):
+def _critic(policy, ckpt):
     """The checkpoint's critic (weights published to actors carry the actor only)."""
     from wmdist.algos.dreamer.nets import ActorCritic
     from wmdist.nets.dists import twohot_bins, twohot_mean
@@ -77,21 +77,19 @@ def probe(run_dir: str, episodes: int, explore: bool = False, seed: int = 1000) 
                           f"{cfg.algo_name} on {cfg.env.id}")
     policy = algo.make_policy("cpu")
     policy.set_weights(weights, version)
-    value_of = _critic(algo, policy, ckpt)
+    value_of = _critic(policy, ckpt)
     env = make_env(cfg.env, seed)
-    xs, values = [], []  # every step of every episode: |x| [n] and the critic's value [n]
+    xs, values = [], []  # every step of every episode: x [n] and the critic's value [n]
     for ep in range(episodes):
-        obs, first, steps, max_x, end, cont_end = env.reset(seed + ep), True, 0, 0.0, "limit", None
-        path = []
+        obs, first, end, cont_end = env.reset(seed + ep), True, "limit", None
+        path = []  # x at every decision of this episode
         while True:
             action, _ = policy.act(obs[None], np.array([first]), None, None, explore)
             with torch.no_grad():  # the posterior state the action was chosen in (act keeps it)
                 values.append(float(value_of(policy.h, policy.z).reshape(-1)[0]))
-            xs.append(abs(float(obs[0])))
             path.append(float(obs[0]))
             obs, _, terminated, truncated = env.step(int(np.asarray(action).reshape(-1)[0]))
-            first, steps = False, steps + 1
-            max_x = max(max_x, abs(float(obs[0])))
+            first = False
             if terminated:
                 end = "x" if abs(float(obs[0])) > X_LIMIT else "angle"
             if terminated and policy.cfg.cont_head:
@@ -101,12 +99,14 @@ def probe(run_dir: str, episodes: int, explore: bool = False, seed: int = 1000) 
                     cont_end = float(torch.sigmoid(policy.wm.heads({"h": h, "z": z}, upto="cont")["cont"].float()).reshape(-1)[0])
             if terminated or truncated:
                 break
+        xs.extend(path)
         drift = float(np.mean(path[len(path) // 2:]))  # where the second half of the episode was spent
-        yield {"episode": ep, "length": steps, "end": end, "max_abs_x": round(max_x, 3),
+        max_x = float(np.abs([*path, float(obs[0])]).max())  # the last observation too (off the track)
+        yield {"episode": ep, "length": len(path), "end": end, "max_abs_x": round(max_x, 3),
                "side": "right" if drift > 0 else "left", "mean_x_second_half": round(drift, 3),
                "cont_at_end": None if cont_end is None else round(cont_end, 4)}
     env.close()
-    x, v = np.asarray(xs), np.asarray(values)
+    x, v = np.abs(xs), np.asarray(values)
     bins = []
     for lo, hi in zip(X_BINS[:-1], X_BINS[1:]):
         sel = (x >= lo) & (x < hi)

@@ -174,15 +174,16 @@ def _cases(kind: str, shard_counts: list[int], quick: bool, run_dir: str) -> lis
         gc.disable()
         for k in [*clients, *raws, "raw_redis_get"]:
             ins[k], smp[k] = [], []
+        order = list(clients.items())
         for i in range(reps):
-            for key, c in _rotated(list(clients.items()), i):
+            for key, c in _rotated(order, i):
                 ins[key].append(_time(lambda: c.insert(batches[i], source_id=i)))
             for k, raw in raws.items():
                 ins[k].append(_time(lambda: raw.put(batches[i], i)))
         stats = {key: c.stats() for key, c in clients.items()}
         used = {key: r.info("memory")["used_memory"] - used[key] for key, r in servers.items()}
         for i in range(reps):
-            for key, c in _rotated(list(clients.items()), i):
+            for key, c in _rotated(order, i):
                 smp[key].append(_time(lambda: c.sample(sample_b)))
             for k, raw in raws.items():
                 smp[k].append(_time(lambda: raw.get(sample_b, i)))
