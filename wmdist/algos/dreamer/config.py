@@ -86,6 +86,10 @@ class DreamerConfig:
                                     "encodes the pole or the ball rather than pay its KL)", ge=0)
     reward_scale: float = param(1.0, "reward loss scale", ge=0)
     cont_scale: float = param(1.0, "continue loss scale", ge=0)
+    cont_terminal_weight: float = param(1.0, "weight of a terminal step's continue loss against a non-terminal "
+                                             "one's (papers: 1). Above 1 the rare ends in replay (a cart leaving the "
+                                             "track, issue 24) teach the continue head more, and it calls states "
+                                             "near such ends terminal sooner", ge=1)
     # --- behaviour -------------------------------------------------------------------
     horizon: int = param(15, "imagination horizon H", ge=1, le=MAX_HORIZON)
     imag_starts: int = param(0, "imagine from at most this many posterior states, drawn at random from the batch (0 = all, as the papers)", ge=0)

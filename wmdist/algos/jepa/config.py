@@ -17,6 +17,9 @@ class JepaConfig:
     cnn_depth: int = param(16, "channels of the first of four stride-2 convs on a 64x64 frame (LeWM: a ViT-tiny)", ge=1)
     embed_dim: int = param(32, "embedding width D after the projector (LeWM: 192)", ge=1)
     proj_hidden: int = param(256, "hidden width of the projector MLP (LeWM: a BatchNorm projector)", ge=1)
+    proj_out_norm: bool = param(True, "end the projector with a BatchNorm (LeWM's). It holds every embedding dimension "
+                                      "at unit variance whatever the loss, so with sigreg_weight 0 the embedding "
+                                      "cannot collapse to a point; false leaves SIGReg alone against collapse")
     bn_frames: int = param(512, "frames of the latest batches on which the learner re-estimates the projector's "
                                 "BatchNorm statistics with the current weights before each publish (planning uses "
                                 "them); 0 = torch's running average over ~10 batches, under which success swung "

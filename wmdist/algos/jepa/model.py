@@ -24,12 +24,16 @@ class Projector(nn.Module):
     """Linear-BN-act-Linear-BN (LeWM: a BatchNorm projector). The batch norms put every embedding
     dimension at unit scale from the start, however little the frames differ (a few pixels of a
     point mass), so SIGReg shapes the distribution instead of first fighting a near-constant encoder;
-    they use running statistics in eval mode (acting)."""
+    they use running statistics in eval mode (acting). Without the last one (`out_norm` False) nothing
+    but SIGReg holds the embedding's scale up: the collapse ablation's clean form."""
 
-    def __init__(self, in_dim: int, hidden: int, out_dim: int, act: str) -> None:
+    def __init__(self, in_dim: int, hidden: int, out_dim: int, act: str, out_norm: bool = True) -> None:
         super().__init__()
-        self.net = nn.Sequential(nn.Linear(in_dim, hidden, bias=False), nn.BatchNorm1d(hidden), ACTIVATIONS[act](),
-                                 nn.Linear(hidden, out_dim, bias=False), nn.BatchNorm1d(out_dim))
+        layers: list[nn.Module] = [nn.Linear(in_dim, hidden, bias=False), nn.BatchNorm1d(hidden), ACTIVATIONS[act](),
+                                   nn.Linear(hidden, out_dim, bias=not out_norm)]
+        if out_norm:
+            layers.append(nn.BatchNorm1d(out_dim))
+        self.net = nn.Sequential(*layers)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:  # [..., F] -> [..., D]
         return self.net(x.reshape(-1, x.shape[-1])).reshape(*x.shape[:-1], -1)
@@ -40,7 +44,7 @@ class JepaModel(nn.Module):
         super().__init__()
         self.cfg, self.action_dim = cfg, action_dim
         self.conv = ConvEncoder(FRAME_CHANNELS, cfg.cnn_depth, cfg.act, norm=True)
-        self.projector = Projector(self.conv.out_dim, cfg.proj_hidden, cfg.embed_dim, cfg.act)
+        self.projector = Projector(self.conv.out_dim, cfg.proj_hidden, cfg.embed_dim, cfg.act, cfg.proj_out_norm)
         self.predictor = mlp(cfg.history * (cfg.embed_dim + action_dim), [cfg.pred_hidden] * cfg.pred_layers,
                              cfg.embed_dim, cfg.act, norm=True, dropout=cfg.pred_dropout)
         # SIGReg's input when `sigreg_head` > 0: trained only through SIGReg, never used to plan
