@@ -7,8 +7,9 @@ first history instead, as planning rolls it out)
 
 with z = projector(encoder(frame)) for every real step of the batch (or SIGReg(head(z)) with
 `sigreg_head`, LeJEPA's arrangement: the head is regularised, z is what planning compares). Both sides of the MSE
-carry gradients: there is no stop-gradient and no EMA target; SIGReg alone keeps the
-embeddings from collapsing (with `sigreg_weight: 0` they do, and the MSE goes to zero).
+carry gradients: there is no stop-gradient and no EMA target; with `proj_out_norm: false` (the preset) SIGReg
+alone keeps the embeddings from collapsing (with `sigreg_weight: 0` they shrink toward a point and the MSE goes to
+zero); a last BatchNorm (`proj_out_norm: true`, LeWM's) holds their per-dimension scale by itself.
 """
 from __future__ import annotations
 
