@@ -106,8 +106,8 @@ class DreamerLearner(Learner):
         metrics: dict[str, float] = {}
         if cfg.cont_head:
             cont_l = bernoulli_nll(heads["cont"].squeeze(-1).reshape(b, t_len), cont_target)  # [B, T]
-            cont_w = weight * (1.0 + (cfg.cont_terminal_weight - 1.0) * t["terminal"].float())  # [B, T]
-            loss = loss + cfg.cont_scale * (cont_l * cont_w).sum() / weight.sum().clamp(min=1.0)
+            term_w = 1.0 + (cfg.cont_terminal_weight - 1.0) * t["terminal"].float()  # [B, T] extra weight on ends
+            loss = loss + cfg.cont_scale * masked_mean(cont_l * term_w, weight)
             metrics["cont_loss"] = float(masked_mean(cont_l.detach(), weight))
         kl, dyn, rep = kl_loss(wm.rssm.kl, obs_out.post, obs_out.prior, weight, cfg.kl_dyn, cfg.kl_rep, cfg.free_nats, cfg.free_avg)
         loss = loss + kl
