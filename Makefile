@@ -7,7 +7,7 @@ STAMP  := $(VENV)/.installed
 CONFIG ?= configs/muzero_cartpole.yaml
 # `make run` is a short demonstration; drop RUN_ARGS for the preset's full budget.
 RUN_ARGS ?= --set run.max_minutes=6
-SYSTEM_PACKAGES := redis-server prometheus libegl1 libegl-mesa0 libgl1-mesa-dri
+SYSTEM_PACKAGES := redis-server prometheus libegl1 libegl-mesa0 libgl1-mesa-dri g++
 export MUJOCO_GL ?= egl
 
 .PHONY: setup system-deps run test bench gpu-check clean
@@ -21,7 +21,7 @@ $(STAMP): pyproject.toml
 	touch $(STAMP)
 
 # Debian packages: redis-server and prometheus are real services the tests start;
-# the EGL libraries render dm_control pixels without a display.
+# the EGL libraries render dm_control pixels without a display; g++ builds torch.compile's CPU kernels.
 system-deps:
 	@missing=""; for p in $(SYSTEM_PACKAGES); do \
 	  dpkg -s $$p >/dev/null 2>&1 || missing="$$missing $$p"; done; \

@@ -62,10 +62,10 @@ class GuardedStep:
 
     def __call__(self, loss: torch.Tensor) -> float:
         """Apply one update from `loss`; returns the pre-clip gradient norm."""
-        if not torch.isfinite(loss.detach()).all():
-            raise NonFiniteLoss(f"loss is {loss.detach().float().item()}")
-        self.optimizer.zero_grad(set_to_none=True)
-        loss.backward()
+        return joint_step([(self, loss)])[0]
+
+    def step(self) -> float:
+        """Clip and apply the gradients already in the parameters; returns the pre-clip norm."""
         max_norm = self.cfg.clip_norm if self.cfg.clip_norm > 0 else float("inf")
         norm = torch.nn.utils.clip_grad_norm_(self.params, max_norm)
         if not torch.isfinite(norm):
@@ -84,3 +84,20 @@ class GuardedStep:
     def load_state_dict(self, state: dict) -> None:
         self.optimizer.load_state_dict(state["optimizer"])
         self.steps = int(state["steps"])
+
+
+def joint_step(pairs: list[tuple[GuardedStep, torch.Tensor]]) -> list[float]:
+    """One backward pass over every loss, then each optimiser's guarded step, in order.
+
+    For losses whose parameter sets take gradients from their own loss only (an actor and a
+    critic): the same gradients as separate backward passes, but the losses may share one
+    autograd graph (a compiled phase that returns both, whose saved tensors one backward frees).
+    Returns the pre-clip gradient norms; a non-finite loss changes nothing.
+    """
+    for _, loss in pairs:
+        if not torch.isfinite(loss.detach()).all():
+            raise NonFiniteLoss(f"loss is {loss.detach().float().item()}")
+    for opt, _ in pairs:
+        opt.optimizer.zero_grad(set_to_none=True)
+    torch.autograd.backward([loss for _, loss in pairs])
+    return [opt.step() for opt, _ in pairs]

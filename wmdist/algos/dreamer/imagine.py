@@ -111,66 +111,82 @@ class ActorCriticLoss:
             return twohot_mean(logits, self.bins)
         return logits.float().squeeze(-1)
 
-    def __call__(self, start: Start, generator: torch.Generator | None) -> tuple[torch.Tensor, torch.Tensor, dict[str, float]]:
+    def __call__(self, start: Start, generator: torch.Generator | None
+                 ) -> tuple[torch.Tensor, torch.Tensor, dict[str, torch.Tensor]]:
+        """(actor loss, critic loss, metrics as 0-d tensors); `generator` None draws from torch's global RNG."""
+        # Under backprop the world model is frozen while the graph is built: the actor's gradient
+        # flows through its dynamics but no weight gradients are recorded for it. (Outside `_losses`:
+        # requires_grad changes inside a compiled function break its graph.)
+        with _freeze(self.wm) if self.backprop else contextlib.nullcontext():
+            return self._losses(start, generator)
+
+    def compile(self) -> None:
+        """Runs `_losses` through torch.compile from now on (one graph for the H imagined steps,
+        the heads, returns and losses, forward and backward). Pass `generator` None to it: dynamo
+        cannot trace draws from a torch.Generator argument and would split the graph at each."""
+        self._losses = torch.compile(self._losses)  # type: ignore[method-assign]
+
+    def _losses(self, start: Start, generator: torch.Generator | None
+                ) -> tuple[torch.Tensor, torch.Tensor, dict[str, torch.Tensor]]:
         cfg, wm, ac = self.cfg, self.wm, self.ac
         H, n = cfg.horizon, start.deter.shape[0]
-        with _freeze(wm) if self.backprop else contextlib.nullcontext():
-            traj = imagine(wm, ac, start, H, self.backprop, generator)
-            h_all = traj.deter.flatten(0, 1)  # [(H+1)*N, D] no gradient path
-            z_all = traj.latent
-            tail_feats = {"h": traj.tail_deter, "z": traj.tail_latent}  # states 1..H, gradient path under backprop
-            grad_ctx = contextlib.nullcontext if self.backprop else torch.no_grad
-            with grad_ctx():
-                # reward and continue of states 1..H (one shared first-layer matmul)
-                heads = wm.heads(tail_feats, upto=wm.last_head)
-                if cfg.reward_head == "twohot":
-                    reward = twohot_mean(heads["reward"], self.bins)
-                else:
-                    reward = heads["reward"].float().squeeze(-1)
-                reward = reward.reshape(H, n)
-                if cfg.cont_head:
-                    cont = torch.sigmoid(heads["cont"].float().squeeze(-1)).reshape(H, n)
-                else:
-                    cont = torch.ones(H, n, device=reward.device)
-            # critic on every imagined state from detached features (trains the critic only)
-            feats_sg = {"h": h_all.detach(), "z": z_all.detach()}
-            critic_logits = ac.critic(feats_sg)["critic"]  # [(H+1)*N, K]
-            value = self._value(critic_logits).reshape(H + 1, n)
-            # the values inside the returns: with backprop they must carry the gradient back
-            # through the imagined states 1..H, never into the critic's weights (the start
-            # states' value is only the first baseline, detached)
-            ret_critic = ac.slow_critic if cfg.slow_critic == "target" else ac.critic  # V2: a periodic copy
-            if self.backprop:
-                with torch.no_grad():
-                    v0 = value[0] if ret_critic is ac.critic else self._value(ret_critic({"h": start.deter, "z": start.latent})["critic"])
-                with _freeze(ret_critic):  # no weight gradients for the critic from the actor's loss
-                    v_tail = self._value(ret_critic(tail_feats)["critic"])  # [H*N]
-                value_ret = torch.cat([v0, v_tail]).reshape(H + 1, n)
-            elif ret_critic is ac.slow_critic:
-                with torch.no_grad():
-                    value_ret = self._value(ret_critic(feats_sg)["critic"]).reshape(H + 1, n)
+        traj = imagine(wm, ac, start, H, self.backprop, generator)
+        h_all = traj.deter.flatten(0, 1)  # [(H+1)*N, D] no gradient path
+        z_all = traj.latent
+        tail_feats = {"h": traj.tail_deter, "z": traj.tail_latent}  # states 1..H, gradient path under backprop
+        grad_ctx = contextlib.nullcontext if self.backprop else torch.no_grad
+        with grad_ctx():
+            # reward and continue of states 1..H (one shared first-layer matmul)
+            heads = wm.heads(tail_feats, upto=wm.last_head)
+            if cfg.reward_head == "twohot":
+                reward = twohot_mean(heads["reward"], self.bins)
             else:
-                value_ret = value.detach()
-            disc = cfg.discount * cont  # [H, N]
-            returns = lambda_returns(reward, disc, value_ret, cfg.lam)  # [H, N] the critic's targets
-            actor_returns = returns  # [H, N] the returns in the actor's advantage
-            if cfg.actor_lam is not None and cfg.actor_lam != cfg.lam:
-                actor_returns = lambda_returns(reward, disc, value_ret, cfg.actor_lam)
-            # weight of step t: start cont times prod_{i<=t} gamma c_i (no credit after a predicted end)
-            weight = torch.cat([torch.ones_like(disc[:1]), disc[:-1]]).cumprod(0) * start.cont  # [H, N]
-            weight = weight.detach()
-            if cfg.return_norm == "percentile":
-                self.norm.update(actor_returns)
-                scale = self.norm.scale
+                reward = heads["reward"].float().squeeze(-1)
+            reward = reward.reshape(H, n)
+            if cfg.cont_head:
+                cont = torch.sigmoid(heads["cont"].float().squeeze(-1)).reshape(H, n)
             else:
-                scale = 1.0
-            base = value_ret[:-1].detach()
-            adv = (actor_returns - base) / scale  # DreamerV3 eq. 11: normalised advantage
-            if self.backprop:
-                pg = -adv
-            else:
-                pg = -traj.logp * adv.detach()  # REINFORCE with the critic as baseline
-            actor_loss = masked_mean(pg - cfg.actor_entropy * traj.entropy, weight)
+                cont = torch.ones(H, n, device=reward.device)
+        # critic on every imagined state from detached features (trains the critic only)
+        feats_sg = {"h": h_all.detach(), "z": z_all.detach()}
+        critic_logits = ac.critic(feats_sg)["critic"]  # [(H+1)*N, K]
+        value = self._value(critic_logits).reshape(H + 1, n)
+        # the values inside the returns: with backprop they must carry the gradient back
+        # through the imagined states 1..H, never into the critic's weights (the start
+        # states' value is only the first baseline, detached)
+        ret_critic = ac.slow_critic if cfg.slow_critic == "target" else ac.critic  # V2: a periodic copy
+        if self.backprop:
+            with torch.no_grad():
+                v0 = value[0] if ret_critic is ac.critic else self._value(ret_critic({"h": start.deter, "z": start.latent})["critic"])
+            # the critic with detached weights: no weight gradients for it from the actor's loss
+            frozen = {k: w.detach() for k, w in ret_critic.named_parameters()}
+            v_tail = self._value(torch.func.functional_call(ret_critic, frozen, (tail_feats,))["critic"])  # [H*N]
+            value_ret = torch.cat([v0, v_tail]).reshape(H + 1, n)
+        elif ret_critic is ac.slow_critic:
+            with torch.no_grad():
+                value_ret = self._value(ret_critic(feats_sg)["critic"]).reshape(H + 1, n)
+        else:
+            value_ret = value.detach()
+        disc = cfg.discount * cont  # [H, N]
+        returns = lambda_returns(reward, disc, value_ret, cfg.lam)  # [H, N] the critic's targets
+        actor_returns = returns  # [H, N] the returns in the actor's advantage
+        if cfg.actor_lam is not None and cfg.actor_lam != cfg.lam:
+            actor_returns = lambda_returns(reward, disc, value_ret, cfg.actor_lam)
+        # weight of step t: start cont times prod_{i<=t} gamma c_i (no credit after a predicted end)
+        weight = torch.cat([torch.ones_like(disc[:1]), disc[:-1]]).cumprod(0) * start.cont  # [H, N]
+        weight = weight.detach()
+        if cfg.return_norm == "percentile":
+            self.norm.update(actor_returns)
+            scale = self.norm.scale_tensor().to(actor_returns.device)
+        else:
+            scale = torch.ones((), device=actor_returns.device)
+        base = value_ret[:-1].detach()
+        adv = (actor_returns - base) / scale  # DreamerV3 eq. 11: normalised advantage
+        if self.backprop:
+            pg = -adv
+        else:
+            pg = -traj.logp * adv.detach()  # REINFORCE with the critic as baseline
+        actor_loss = masked_mean(pg - cfg.actor_entropy * traj.entropy, weight)
         # critic: regress lambda-returns (+ V3 slow-critic regulariser)
         target = returns.detach()
         logits_h = critic_logits.reshape(H + 1, n, -1)[:-1]
@@ -187,23 +203,24 @@ class ActorCriticLoss:
             else:
                 closs = closs + cfg.slow_reg_scale * 0.5 * (logits_h.float().squeeze(-1) - slow).pow(2)
         critic_loss = masked_mean(closs, weight)
-        metrics: dict[str, float] = {}
+        # metrics stay 0-d tensors here: a host sync inside a compiled phase would break its graph
+        metrics: dict[str, torch.Tensor] = {}
         if cfg.repval_scale > 0 and start.replay is not None:
             rep_loss, metrics["replay_return"] = self._replay_critic_loss(start, returns[0].detach())
             critic_loss = critic_loss + cfg.repval_scale * rep_loss
-            metrics["repval_loss"] = float(rep_loss.detach())
+            metrics["repval_loss"] = rep_loss.detach()
         metrics.update({
-            "actor_loss": float(actor_loss.detach()),
-            "critic_loss": float(critic_loss.detach()),
-            "actor_entropy": float(traj.entropy.detach().mean()),
-            "imag_return": float(returns.detach().mean()),
-            "imag_reward": float(reward.detach().mean()),
-            "value": float(value.detach().mean()),
-            "return_scale": float(scale),
+            "actor_loss": actor_loss.detach(),
+            "critic_loss": critic_loss.detach(),
+            "actor_entropy": traj.entropy.detach().mean(),
+            "imag_return": returns.detach().mean(),
+            "imag_reward": reward.detach().mean(),
+            "value": value.detach().mean(),
+            "return_scale": scale.detach(),
         })
         return actor_loss, critic_loss, metrics
 
-    def _replay_critic_loss(self, start: Start, start_returns: torch.Tensor) -> tuple[torch.Tensor, float]:
+    def _replay_critic_loss(self, start: Start, start_returns: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """Critic NLL of the replay lambda-returns on every real, non-terminal posterior state.
 
         start_returns: [N] imagination returns R^lambda_0 of the start states, the value
@@ -224,7 +241,7 @@ class ActorCriticLoss:
         else:
             nll = 0.5 * (logits.float().squeeze(-1) - target.flatten()).pow(2)
         w = rep.weight * (1.0 - rep.terminal.float())  # a terminal state has no return to learn
-        return masked_mean(nll.reshape(b, t_len), w), float(masked_mean(target, w))
+        return masked_mean(nll.reshape(b, t_len), w), masked_mean(target, w).detach()
 
 
 def _rows(lat: Latent, rows: slice) -> Latent:

@@ -20,7 +20,7 @@ from wmdist.nets.dists import bernoulli_nll, twohot_bins, twohot_loss
 from wmdist.nets.generator import seeded_generator
 from wmdist.nets.kl import kl_loss, masked_mean
 from wmdist.nets.latent_layers import Latent
-from wmdist.nets.optim import GuardedStep, OptimConfig, lr_at
+from wmdist.nets.optim import GuardedStep, OptimConfig, joint_step, lr_at
 from wmdist.nets.polyak import polyak_
 from wmdist.nets.world_model import load_world_model, world_model_weights
 
@@ -48,6 +48,8 @@ class DreamerLearner(Learner):
         self.ac = ActorCritic(cfg, spec, self.wm.rssm.z_dim).to(self.device)
         self.bins = twohot_bins(cfg.bins, cfg.bin_low, cfg.bin_high).to(self.device)
         self.ac_loss = ActorCriticLoss(cfg, self.wm, self.ac, self.bins)
+        if cfg.compile_actor_critic:
+            self.ac_loss.compile()
 
         def opt(lr: float, clip: float, **schedule: Any) -> OptimConfig:
             return OptimConfig(kind="adam", lr=lr, eps=cfg.adam_eps, clip_norm=clip, **schedule)
@@ -58,6 +60,9 @@ class DreamerLearner(Learner):
         self.actor_opt = GuardedStep(self.ac.actor.parameters(), opt(cfg.actor_lr, cfg.ac_clip, **actor_schedule))
         self.critic_opt = GuardedStep(self.ac.critic.parameters(), opt(cfg.critic_lr, cfg.ac_clip))
         self.generator = seeded_generator(self.device, seed)
+        # The compiled phase draws from torch's global RNG (seeded above; not in the checkpoint): dynamo
+        # cannot trace draws from a torch.Generator argument and would split the H-step graph at each.
+        self._ac_generator = None if cfg.compile_actor_critic else self.generator
         self.updates = 0
         follow = "bf16" if cfg.bf16 else "fp32"
         # What get_weights publishes when cfg.publish_ema > 0: slow copies of the world model and actor.
@@ -138,15 +143,16 @@ class DreamerLearner(Learner):
             replay = start.replay and dataclasses.replace(start.replay, deter=start.replay.deter.float())
             start = dataclasses.replace(start, deter=start.deter.float(), replay=replay)
         with prec.timed("actor_critic", spent), prec.autocast("actor_critic"):
-            actor_loss, critic_loss, ac_metrics = self.ac_loss(start, self.generator)
+            actor_loss, critic_loss, ac_metrics = self.ac_loss(start, self._ac_generator)
         for name, loss in (("model", model_loss), ("actor", actor_loss), ("critic", critic_loss)):
             if not torch.isfinite(loss.detach()).all():
                 raise NonFiniteLoss(f"dreamer {name} loss is {float(loss.detach())}")
-        # actor first: its graph reads the critic's and world model's current weights
+        # one backward for both (a compiled phase returns them from one graph), before any weight changes:
+        # the actor's graph reads the critic's and world model's current weights
         with prec.timed("actor_critic", spent):
             metrics["actor_lr"] = lr_at(self.actor_opt.cfg, self.actor_opt.steps)  # the rate this step applies
-            metrics["actor_grad_norm"] = self.actor_opt(actor_loss)
-            metrics["critic_grad_norm"] = self.critic_opt(critic_loss)
+            metrics["actor_grad_norm"], metrics["critic_grad_norm"] = joint_step(
+                [(self.actor_opt, actor_loss), (self.critic_opt, critic_loss)])
         with prec.timed("world_model", spent):
             metrics["model_grad_norm"] = self.wm_opt(model_loss)
         metrics.update(prec.end_update(spent))
@@ -156,7 +162,7 @@ class DreamerLearner(Learner):
         if self.ema is not None:
             polyak_(self.ema[0], self.wm, 1.0 - self.cfg.publish_ema)
             polyak_(self.ema[1], self.ac.actor, 1.0 - self.cfg.publish_ema)
-        metrics.update(ac_metrics)
+        metrics.update({k: float(v) for k, v in ac_metrics.items()})
         return UpdateResult(metrics=metrics)
 
     def get_weights(self) -> Weights:

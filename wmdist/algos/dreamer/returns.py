@@ -48,7 +48,11 @@ class PercentileNormalizer:
 
     @property
     def scale(self) -> float:
-        return float(torch.clamp(self.high - self.low, min=1.0))
+        return float(self.scale_tensor())
+
+    def scale_tensor(self) -> torch.Tensor:
+        """max(1, P_high - P_low) as a 0-d tensor (no host sync inside a compiled graph)."""
+        return torch.clamp(self.high - self.low, min=1.0)
 
     def state_dict(self) -> dict[str, torch.Tensor]:
         return {"low": self.low.clone(), "high": self.high.clone()}
