@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import dataclasses
 import os
+import shutil
 from dataclasses import dataclass
 from typing import Any
 
@@ -151,11 +152,11 @@ class DreamerConfig:
         None, "imagination + actor-critic phase: fp32, bf16 or auto (as precision_world_model); None follows `bf16`",
         choices=("fp32", "bf16", "auto"))
     precision_trials: int = param(2, "auto: timed updates per precision after one warm-up update in each", ge=1)
-    # inductor fuses the elementwise work of the H imagined steps and their backward: 1.18x (discrete)
-    # and 1.31x (continuous) per update on the small V3 model (BENCHMARKS, session 33); the world model's
-    # observe loop breaks the graph at every sampled latent and runs slower compiled, so it stays eager
+    # one graph fuses the elementwise work of the H imagined steps and their backward: 1.17x (discrete) and
+    # 1.28x (continuous) per update on the small V3 model (BENCHMARKS, session 48); the world model stays
+    # eager: its observe loop branches on the batch's episode starts and draws from the generator per step
     compile_actor_critic: bool = param(
-        False, "run imagination + the actor-critic losses through torch.compile (inductor); costs 1-2 minutes "
+        False, "run imagination + the actor-critic losses through torch.compile (inductor); costs 1.5-2 minutes "
         "of compiling at start-up per precision the phase runs in, and needs a C++ compiler on CPU")
 
     def resolved(self) -> "DreamerConfig":
@@ -190,7 +191,5 @@ class DreamerConfig:
 
 def cxx_compiler() -> str | None:
     """The C++ compiler inductor would build CPU kernels with ($CXX, else g++ or clang++), if any."""
-    import shutil
-
     names = [os.environ["CXX"]] if os.environ.get("CXX") else ["g++", "clang++"]
     return next((path for path in map(shutil.which, names) if path), None)
