@@ -1,6 +1,7 @@
 """EnvSpec: what an algorithm needs to know about an environment to build its networks."""
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -43,4 +44,4 @@ class EnvSpec:
     @property
     def action_dim(self) -> int:
         """Width of the action as a network input: n for discrete (one-hot), D for continuous."""
-        return self.num_actions if self.discrete else int(np.prod(self.action_shape))
+        return self.num_actions if self.discrete else math.prod(self.action_shape)  # math, not numpy: traceable

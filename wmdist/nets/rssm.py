@@ -157,8 +157,11 @@ class RSSM(nn.Module):
         e_part = self.embed_part(embed)  # [B, T, U], one matmul for the whole sequence
         keep = (~first).float().unsqueeze(-1)  # [B, T, 1]
         keep[:, 0] = 0.0  # a sampled window starts from the zero state
-        # steps where no row restarts skip the masking (most of them: ~10% fewer ops per step)
-        resets = (keep.squeeze(-1) == 0).any(0).tolist()  # [T]
+        if torch.compiler.is_compiling():
+            # a host read would split a compiled graph; masking by keep = 1 multiplies by one exactly
+            resets = [True] * t_len
+        else:  # steps where no row restarts skip the masking (most of them: ~10% fewer ops per step)
+            resets = (keep.squeeze(-1) == 0).any(0).tolist()  # [T]
         # a_{t-1} enters step t: the actions' share for the whole sequence in one matmul
         a_prev = torch.cat([torch.zeros_like(action[:, :1]), action[:, :-1]], 1)  # [B, T, A]
         a_part = self.action_part(a_prev)  # [B, T, U]

@@ -158,6 +158,8 @@ class DreamerConfig:
     compile_actor_critic: bool = param(
         False, "run imagination + the actor-critic losses through torch.compile (inductor); costs 1.5-2 minutes "
         "of compiling at start-up per precision the phase runs in, and needs a C++ compiler on CPU")
+    compile_world_model: bool = param(
+        False, "run the world model's losses (encoder, the T observe steps, heads, KL) through torch.compile")
 
     def resolved(self) -> "DreamerConfig":
         """A copy with every None replaced by the version's default (and the V3 size table)."""
@@ -184,9 +186,10 @@ class DreamerConfig:
             raise ValueError("algo.actor_min_std must be below algo.actor_max_std")
         if self.classes == 1:
             raise ValueError("algo.classes must be 0 (Gaussian) or at least 2")
-        if self.compile_actor_critic and not cxx_compiler():
-            raise ValueError("algo.compile_actor_critic needs a C++ compiler for torch.compile (g++, clang++ "
-                             "or $CXX); install one (`make system-deps`) or set it false")
+        for name in ("compile_world_model", "compile_actor_critic"):
+            if getattr(self, name) and not cxx_compiler():
+                raise ValueError(f"algo.{name} needs a C++ compiler for torch.compile (g++, clang++ "
+                                 "or $CXX); install one (`make system-deps`) or set it false")
 
 
 def cxx_compiler() -> str | None:

@@ -63,6 +63,9 @@ class DreamerLearner(Learner):
         # The compiled phase draws from torch's global RNG (seeded above; not in the checkpoint): dynamo
         # cannot trace draws from a torch.Generator argument and would split the H-step graph at each.
         self._ac_generator = None if cfg.compile_actor_critic else self.generator
+        self._wm_generator = None if cfg.compile_world_model else self.generator
+        if cfg.compile_world_model:
+            self._wm_losses = torch.compile(self._wm_losses)  # type: ignore[method-assign]
         self.updates = 0
         follow = "bf16" if cfg.bf16 else "fp32"
         # What get_weights publishes when cfg.publish_ema > 0: slow copies of the world model and actor.
@@ -90,11 +93,35 @@ class DreamerLearner(Learner):
         return out
 
     def world_model_loss(self, t: dict[str, torch.Tensor]) -> tuple[torch.Tensor, dict[str, float], Start]:
+        cfg = self.cfg
+        loss, metrics_t, h, z = self._wm_losses(t, self._wm_generator)
+        metrics = {k: float(v) for k, v in metrics_t.items()}
+        weight = t["mask"].float() * t["is_weight"][:, None]  # [B, T]
+        rows = torch.nonzero(t["mask"].flatten() > 0).squeeze(-1)  # imagine only from real steps
+        if 0 < cfg.imag_starts < rows.numel():
+            # a random subset: the actor-critic cost scales with the starts, its gradient is an
+            # average over starts x H states, so fewer starts mostly add noise, not bias
+            pick = torch.randperm(rows.numel(), generator=self.generator, device=rows.device)[: cfg.imag_starts]
+            rows = rows[pick]
+        replay = None
+        if cfg.repval_scale > 0:
+            replay = ReplayStates(h.detach(), z.detach(), t["reward"].float(), t["terminal"].bool(), t["first"].bool(),
+                                  weight)
+        cont_target = 1.0 - t["terminal"].float()
+        start = Start(h.detach()[rows], _select(z.detach(), rows), cont_target.flatten()[rows], rows, replay)
+        return loss, metrics, start
+
+    def _wm_losses(self, t: dict[str, torch.Tensor], generator: torch.Generator | None
+                   ) -> tuple[torch.Tensor, dict[str, torch.Tensor], torch.Tensor, Latent]:
+        """(model loss, metrics as 0-d tensors, posterior states h [B*T, D] and z [B*T]).
+
+        No host reads here (compiled with `algo.compile_world_model`: one graph for the T observe steps,
+        heads and losses); `generator` None draws from torch's global RNG."""
         cfg, wm = self.cfg, self.wm
         b, t_len = t["mask"].shape
         weight = t["mask"].float() * t["is_weight"][:, None]  # [B, T]
         embed = wm.encode(t["obs"])  # [B, T, E]
-        obs_out = wm.rssm.observe(embed, action_to_model(t["action"], self.spec), t["first"].bool(), self.generator)
+        obs_out = wm.rssm.observe(embed, action_to_model(t["action"], self.spec), t["first"].bool(), generator)
         h = obs_out.deter.flatten(0, 1)  # [B*T, D]
         z = obs_out.latent
         heads = wm.heads({"h": h, "z": z})
@@ -106,31 +133,21 @@ class DreamerLearner(Learner):
             rew_l = twohot_loss(heads["reward"], reward.flatten(), self.bins).reshape(b, t_len)
         else:
             rew_l = 0.5 * (heads["reward"].float().squeeze(-1).reshape(b, t_len) - reward).pow(2)
-        cont_target = 1.0 - t["terminal"].float()
         loss = cfg.recon_scale * masked_mean(recon, weight) + cfg.reward_scale * masked_mean(rew_l, weight)
-        metrics: dict[str, float] = {}
+        metrics: dict[str, torch.Tensor] = {}
         if cfg.cont_head:
+            cont_target = 1.0 - t["terminal"].float()
             cont_l = bernoulli_nll(heads["cont"].squeeze(-1).reshape(b, t_len), cont_target)  # [B, T]
             term_w = 1.0 + (cfg.cont_terminal_weight - 1.0) * t["terminal"].float()  # [B, T] extra weight on ends
             loss = loss + cfg.cont_scale * masked_mean(cont_l * term_w, weight)
-            metrics["cont_loss"] = float(masked_mean(cont_l.detach(), weight))
+            metrics["cont_loss"] = masked_mean(cont_l.detach(), weight)
         kl, dyn, rep = kl_loss(wm.rssm.kl, obs_out.post, obs_out.prior, weight, cfg.kl_dyn, cfg.kl_rep, cfg.free_nats, cfg.free_avg)
         loss = loss + kl
         metrics.update(
-            model_loss=float(loss.detach()), recon_loss=float(masked_mean(recon.detach(), weight)),
-            reward_loss=float(masked_mean(rew_l.detach(), weight)), kl_dyn=float(dyn), kl_rep=float(rep),
+            model_loss=loss.detach(), recon_loss=masked_mean(recon.detach(), weight),
+            reward_loss=masked_mean(rew_l.detach(), weight), kl_dyn=dyn, kl_rep=rep,
         )
-        rows = torch.nonzero(t["mask"].flatten() > 0).squeeze(-1)  # imagine only from real steps
-        if 0 < cfg.imag_starts < rows.numel():
-            # a random subset: the actor-critic cost scales with the starts, its gradient is an
-            # average over starts x H states, so fewer starts mostly add noise, not bias
-            pick = torch.randperm(rows.numel(), generator=self.generator, device=rows.device)[: cfg.imag_starts]
-            rows = rows[pick]
-        replay = None
-        if cfg.repval_scale > 0:
-            replay = ReplayStates(h.detach(), z.detach(), reward, t["terminal"].bool(), t["first"].bool(), weight)
-        start = Start(h.detach()[rows], _select(z.detach(), rows), cont_target.flatten()[rows], rows, replay)
-        return loss, metrics, start
+        return loss, metrics, h, z
 
     # --- Learner API ----------------------------------------------------------------
     def update(self, batch: Batch) -> UpdateResult:
