@@ -79,9 +79,26 @@ def unimix_logits(logits: torch.Tensor, mix: float) -> torch.Tensor:
     return torch.log(probs)
 
 
+def rand_as(x: torch.Tensor, generator: torch.Generator | None = None) -> torch.Tensor:
+    """Uniform [0, 1) float32 draws shaped and placed like `x`.
+
+    Without a generator it is `rand_like`: compiled code whose batch size is symbolic cannot pass a
+    shape to `torch.rand` (and draws the same values from the global RNG as `torch.rand(x.shape)`)."""
+    if generator is None:
+        return torch.rand_like(x, dtype=torch.float32, memory_format=torch.contiguous_format)
+    return torch.rand(x.shape, generator=generator, device=x.device)
+
+
+def randn_as(x: torch.Tensor, generator: torch.Generator | None = None) -> torch.Tensor:
+    """Standard normal float32 draws shaped and placed like `x` (`randn_like` without a generator, as `rand_as`)."""
+    if generator is None:
+        return torch.randn_like(x, dtype=torch.float32, memory_format=torch.contiguous_format)
+    return torch.randn(x.shape, generator=generator, device=x.device)
+
+
 def sample_onehot_index(logp: torch.Tensor, generator: torch.Generator | None = None) -> torch.Tensor:
     """Sample class indices from log-probabilities [..., C] with the Gumbel-max trick -> [...]."""
-    u = torch.rand(logp.shape, generator=generator, device=logp.device).clamp_(1e-20, 1.0)
+    u = rand_as(logp, generator).clamp_(1e-20, 1.0)
     return torch.argmax(logp - torch.log(-torch.log(u)), -1)
 
 
@@ -91,7 +108,7 @@ def sample_index_from_probs(probs: torch.Tensor, generator: torch.Generator | No
     One uniform per variable and no logarithms (cheaper than Gumbel-max for 32x32 latents).
     """
     cdf = probs.detach().float().cumsum(-1)
-    u = torch.rand((*probs.shape[:-1], 1), generator=generator, device=probs.device) * cdf[..., -1:]
+    u = rand_as(cdf[..., -1:], generator) * cdf[..., -1:]
     return (cdf < u).sum(-1).clamp_(max=probs.shape[-1] - 1)
 
 

@@ -16,7 +16,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from wmdist.nets.latent_layers import GRUCell, Latent, SplitLinear, norm_act
-from wmdist.nets.dists import categorical_kl, gaussian_kl, sample_index_from_probs, unimix_logits
+from wmdist.nets.dists import categorical_kl, gaussian_kl, randn_as, sample_index_from_probs, unimix_logits
 
 
 class RSSMConfig(Protocol):
@@ -86,7 +86,7 @@ class RSSM(nn.Module):
             index = sample_index_from_probs(probs, generator)
             return Latent(index=index, probs=probs if grad else None, classes=self.classes)
         mean, std = stats.chunk(2, -1)
-        eps = torch.randn(mean.shape, generator=generator, device=mean.device)
+        eps = randn_as(mean, generator)
         z = mean + std * eps
         return Latent(sample=z if grad else z.detach())
 

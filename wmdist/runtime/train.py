@@ -154,6 +154,7 @@ def train(cfg: RunConfig | None = None, resume: str | None = None, overrides: li
         handler = _file_log(run_dir)
         log.info("start%s: %s", f" (resume from {ckpt.name})" if ckpt else "", " ".join(sys.argv))
         print(f"wmdist: run directory {run_dir}", file=out, flush=True)
+        _compile_note(cfg, out)
         try:
             return _run(cfg, spec, fields, run_dir, ckpt, state, hub, out)
         finally:
@@ -162,6 +163,16 @@ def train(cfg: RunConfig | None = None, resume: str | None = None, overrides: li
     finally:
         if lock is not None:
             lock.release()
+
+
+def _compile_note(cfg: RunConfig, out) -> None:
+    """Says why a learner with compiled phases makes no update for its first minutes."""
+    names = {"world_model": "world-model", "actor_critic": "actor-critic"}
+    phases = [name for key, name in names.items() if getattr(cfg.algo, f"compile_{key}", False)]
+    if phases:
+        print(f"wmdist: the learner compiles its {' and '.join(phases)} phase{'s' if len(phases) > 1 else ''} in its "
+              "first updates: minutes on a first start, less from inductor's cache; env steps wait meanwhile",
+              file=out, flush=True)
 
 
 def _run(cfg: RunConfig, spec, fields: dict, run_dir: Path, ckpt: Path | None, state: dict | None, hub,

@@ -1,6 +1,9 @@
 """`algo.compile_actor_critic` and `algo.compile_world_model`: each phase through torch.compile gives
 the eager learner's losses and weights (the eager learner is the reference), each compiled phase is
 one graph, and a machine without a C++ compiler is refused in one config line."""
+import io
+from pathlib import Path
+
 import numpy as np
 import pytest
 import torch
@@ -10,6 +13,10 @@ from dreamer_loop import tiny_config
 from wmdist.algos.dreamer import Dreamer
 from wmdist.algos.dreamer.config import cxx_compiler
 from wmdist.bench.dreamer import bench_spec, random_batch
+from wmdist.config.loader import load_config
+from wmdist.runtime.train import _compile_note
+
+PRESETS = Path(__file__).parents[3] / "configs"
 
 LOSSES = ("model_loss", "actor_loss", "critic_loss")
 
@@ -39,13 +46,14 @@ def _compare_compiled_with_eager(discrete: bool, phases: tuple[str, ...]) -> Non
     for i in range(3):
         batch = random_batch(spec, 4, 8, seed=i)
         batch["first"][1, 4] = True  # an episode start mid-window: the compiled observe masks every step
+        batch["mask"][0, 8 - i:] = False  # padding: the number of imagination starts differs in each update
         torch.manual_seed(100 + i)
         me = eager.update(batch).metrics
         torch.manual_seed(100 + i)
         mc = compiled.update(batch).metrics
         for k in LOSSES + ("recon_loss", "kl_dyn", "actor_entropy", "imag_return", "value", "return_scale"):
             np.testing.assert_allclose(mc[k], me[k], rtol=1e-4, atol=1e-5, err_msg=f"{k} after update {i}")
-    # each compiled phase in one graph, compiled once
+    # each compiled phase in one graph, compiled once for every number of starts
     assert torch._dynamo.utils.counters["stats"]["unique_graphs"] == len(phases)
     for name, p in eager.ac.state_dict().items():  # both trained the same actor and critic
         np.testing.assert_allclose(compiled.ac.state_dict()[name].numpy(), p.numpy(), rtol=1e-3, atol=1e-5, err_msg=name)
@@ -60,3 +68,12 @@ def test_compile_without_a_cxx_compiler_is_one_config_error(monkeypatch):
     with pytest.raises(ValueError, match="compile_world_model needs a C\\+\\+ compiler"):
         tiny_config(3, compile_world_model=True).resolved()
     tiny_config(3).resolved()  # off: no compiler needed
+
+
+def test_a_run_with_compiled_phases_says_why_its_first_updates_wait():
+    out = io.StringIO()
+    _compile_note(load_config(PRESETS / "dreamerv3_cartpole.yaml", ["algo.compile_world_model=true"]), out)
+    assert "compiles its world-model phase" in out.getvalue()
+    out = io.StringIO()
+    _compile_note(load_config(PRESETS / "dreamerv3_cartpole.yaml", []), out)
+    assert out.getvalue() == ""

@@ -11,7 +11,7 @@ import math
 import torch
 import torch.nn.functional as F
 
-from wmdist.nets.dists import sample_onehot_index, unimix_logits
+from wmdist.nets.dists import randn_as, sample_onehot_index, unimix_logits
 
 
 def _softplus_inverse(y: float) -> float:
@@ -41,7 +41,7 @@ class ActionDist:
         """Discrete: indices [N] (no gradient). Continuous: reparameterised actions [N, A] in [-1, 1]."""
         if self.discrete:
             return sample_onehot_index(self.logp.detach(), generator)
-        eps = torch.randn(self.mean.shape, generator=generator, device=self.mean.device)
+        eps = randn_as(self.mean, generator)
         x = self.mean + self.std * eps
         if self.kind == "tanh_normal":
             return torch.tanh(x)

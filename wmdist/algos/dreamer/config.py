@@ -152,14 +152,16 @@ class DreamerConfig:
         None, "imagination + actor-critic phase: fp32, bf16 or auto (as precision_world_model); None follows `bf16`",
         choices=("fp32", "bf16", "auto"))
     precision_trials: int = param(2, "auto: timed updates per precision after one warm-up update in each", ge=1)
-    # one graph fuses the elementwise work of the H imagined steps and their backward: 1.17x (discrete) and
-    # 1.28x (continuous) per update on the small V3 model (BENCHMARKS, session 48); the world model stays
-    # eager: its observe loop branches on the batch's episode starts and draws from the generator per step
+    # One graph per phase fuses its elementwise work, forward and backward. On the small V3 model (2 threads,
+    # Intel Xeon with AMX; BENCHMARKS, session 49), side by side with eager: the actor-critic alone 1.32x
+    # (discrete) and 1.25x (continuous); with the world model too 1.51x and 1.37x (2.42 and 1.73 updates/s).
     compile_actor_critic: bool = param(
-        False, "run imagination + the actor-critic losses through torch.compile (inductor); costs 1.5-2 minutes "
+        False, "run imagination + the actor-critic losses through torch.compile (inductor); costs 1.5-2.5 minutes "
         "of compiling at start-up per precision the phase runs in, and needs a C++ compiler on CPU")
     compile_world_model: bool = param(
-        False, "run the world model's losses (encoder, the T observe steps, heads, KL) through torch.compile")
+        False, "run the world model's losses (encoder, the T observe steps, heads, KL) through torch.compile; "
+        "costs 4-8 minutes of compiling per precision on a first start (T = 64), far less from inductor's cache, "
+        "and needs a C++ compiler on CPU")
 
     def resolved(self) -> "DreamerConfig":
         """A copy with every None replaced by the version's default (and the V3 size table)."""

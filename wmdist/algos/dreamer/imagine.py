@@ -97,6 +97,14 @@ def imagine(
     return Trajectory(deter, latent, tail_deter, tail, torch.stack(logps), torch.stack(ents))
 
 
+def _mark_starts_dynamic(start: Start) -> None:
+    """The number of starts follows the batch's real steps, so it changes between updates: compile
+    for any N at once (a graph per N would recompile for minutes, and past dynamo's limit run eager)."""
+    for x in (start.deter, start.latent.index, start.latent.sample, start.cont, start.rows):
+        if x is not None:
+            torch._dynamo.maybe_mark_dynamic(x, 0)
+
+
 class ActorCriticLoss:
     """Computes the actor and critic losses of one update (V1/V2/V3 per config)."""
 
@@ -117,14 +125,19 @@ class ActorCriticLoss:
         # Under backprop the world model is frozen while the graph is built: the actor's gradient
         # flows through its dynamics but no weight gradients are recorded for it. (Outside `_losses`:
         # requires_grad changes inside a compiled function break its graph.)
+        if self.compiled:
+            _mark_starts_dynamic(start)
         with _freeze(self.wm) if self.backprop else contextlib.nullcontext():
             return self._losses(start, generator)
+
+    compiled = False
 
     def compile(self) -> None:
         """Runs `_losses` through torch.compile from now on (one graph for the H imagined steps,
         the heads, returns and losses, forward and backward). Pass `generator` None to it: dynamo
         cannot trace draws from a torch.Generator argument and would split the graph at each."""
         self._losses = torch.compile(self._losses)  # type: ignore[method-assign]
+        self.compiled = True
 
     def _losses(self, start: Start, generator: torch.Generator | None
                 ) -> tuple[torch.Tensor, torch.Tensor, dict[str, torch.Tensor]]:
@@ -197,7 +210,7 @@ class ActorCriticLoss:
             closs = 0.5 * (logits_h.float().squeeze(-1) - target).pow(2)
         if cfg.slow_critic == "reg":
             with torch.no_grad():
-                slow = self._value(ac.slow_critic({"h": h_all.detach()[: H * n], "z": _rows(z_all.detach(), slice(0, H * n))})["critic"]).reshape(H, n)
+                slow = self._value(ac.slow_critic({"h": h_all.detach().narrow(0, 0, H * n), "z": _first_rows(z_all.detach(), H * n)})["critic"]).reshape(H, n)
             if cfg.critic_head == "twohot":
                 closs = closs + cfg.slow_reg_scale * twohot_nll(logp_h, slow, self.bins)
             else:
@@ -244,7 +257,7 @@ class ActorCriticLoss:
         return masked_mean(nll.reshape(b, t_len), w), masked_mean(target, w).detach()
 
 
-def _rows(lat: Latent, rows: slice) -> Latent:
-    """The states `rows` of a flat latent batch."""
-    cut = lambda x: None if x is None else x[rows]  # noqa: E731
+def _first_rows(lat: Latent, k: int) -> Latent:
+    """The first `k` states of a flat latent batch (`narrow`: a slice would fix a symbolic batch size)."""
+    cut = lambda x: None if x is None else x.narrow(0, 0, k)  # noqa: E731
     return Latent(cut(lat.index), cut(lat.probs), cut(lat.sample), lat.classes)
