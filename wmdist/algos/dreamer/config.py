@@ -156,7 +156,7 @@ class DreamerConfig:
     # Intel Xeon with AMX; BENCHMARKS, session 49), side by side with eager: the actor-critic alone 1.32x
     # (discrete) and 1.25x (continuous); with the world model too 1.51x and 1.37x (2.42 and 1.73 updates/s).
     compile_actor_critic: bool = param(
-        False, "run imagination + the actor-critic losses through torch.compile (inductor); costs 1.5-2.5 minutes "
+        False, "run imagination + the actor-critic losses through torch.compile (inductor); costs 2-3 minutes "
         "of compiling at start-up per precision the phase runs in, and needs a C++ compiler on CPU")
     compile_world_model: bool = param(
         False, "run the world model's losses (encoder, the T observe steps, heads, KL) through torch.compile; "
