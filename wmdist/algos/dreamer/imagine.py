@@ -113,6 +113,7 @@ class ActorCriticLoss:
         self.norm = PercentileNormalizer(cfg.return_decay, cfg.return_low, cfg.return_high)
         discrete = wm.spec.discrete
         self.backprop = (cfg.actor_grad_disc if discrete else cfg.actor_grad_cont) == "backprop"
+        self.compiled = False  # set by compile()
 
     def _value(self, logits: torch.Tensor) -> torch.Tensor:
         if self.cfg.critic_head == "twohot":
@@ -129,8 +130,6 @@ class ActorCriticLoss:
             _mark_starts_dynamic(start)
         with _freeze(self.wm) if self.backprop else contextlib.nullcontext():
             return self._losses(start, generator)
-
-    compiled = False
 
     def compile(self) -> None:
         """Runs `_losses` through torch.compile from now on (one graph for the H imagined steps,

@@ -60,8 +60,8 @@ class DreamerLearner(Learner):
         self.actor_opt = GuardedStep(self.ac.actor.parameters(), opt(cfg.actor_lr, cfg.ac_clip, **actor_schedule))
         self.critic_opt = GuardedStep(self.ac.critic.parameters(), opt(cfg.critic_lr, cfg.ac_clip))
         self.generator = seeded_generator(self.device, seed)
-        # The compiled phase draws from torch's global RNG (seeded above; not in the checkpoint): dynamo
-        # cannot trace draws from a torch.Generator argument and would split the H-step graph at each.
+        # A compiled phase draws from torch's global RNG (seeded above; not in the checkpoint): dynamo
+        # cannot trace draws from a torch.Generator argument and would split its graph at each.
         self._ac_generator = None if cfg.compile_actor_critic else self.generator
         self._wm_generator = None if cfg.compile_world_model else self.generator
         if cfg.compile_world_model:
@@ -96,7 +96,6 @@ class DreamerLearner(Learner):
         cfg = self.cfg
         loss, metrics_t, h, z = self._wm_losses(t, self._wm_generator)
         metrics = {k: float(v) for k, v in metrics_t.items()}
-        weight = t["mask"].float() * t["is_weight"][:, None]  # [B, T]
         rows = torch.nonzero(t["mask"].flatten() > 0).squeeze(-1)  # imagine only from real steps
         if 0 < cfg.imag_starts < rows.numel():
             # a random subset: the actor-critic cost scales with the starts, its gradient is an
@@ -105,6 +104,7 @@ class DreamerLearner(Learner):
             rows = rows[pick]
         replay = None
         if cfg.repval_scale > 0:
+            weight = t["mask"].float() * t["is_weight"][:, None]  # [B, T]
             replay = ReplayStates(h.detach(), z.detach(), t["reward"].float(), t["terminal"].bool(), t["first"].bool(),
                                   weight)
         cont_target = 1.0 - t["terminal"].float()
