@@ -11,7 +11,7 @@ from wmdist.replay import shard_shm
 from wmdist.replay.shard import ReplayShard
 from wmdist.replay.shard_shm import ShmShard
 from wmdist.replay.shm import ShmSegment, segment_prefix, sweep
-from wmdist.replay.shm_rows import commit_rows, read_rows, write_rows
+from wmdist.replay.shm_rows import ShmRows, commit_rows, read_rows, write_rows
 
 
 @pytest.fixture
@@ -29,7 +29,7 @@ def _read(seg: ShmSegment, slots: np.ndarray, stamps: np.ndarray, on_copied=None
     k = len(slots)
     out = {f: np.empty((k, T, *s.shape), s.dtype) for f, s in FIELDS.items()}
     mask = np.empty((k, T), bool)
-    bad = read_rows(seg, slots, stamps, out, mask, on_copied)
+    bad = read_rows(ShmRows([seg], list(FIELDS)), np.zeros(k, np.int64), slots, stamps, out, mask, on_copied)
     return out, mask, bad
 
 

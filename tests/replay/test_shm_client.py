@@ -73,11 +73,11 @@ def test_a_row_rewritten_during_the_read_is_drawn_again(started, monkeypatch):
     real = replay_shm.read_rows
     calls = []
 
-    def read_then_overwrite(seg, slots, stamps, out, mask_out, on_copied=None):
+    def read_then_overwrite(rows, shard_of, slots, stamps, out, mask_out, on_copied=None, at=None):
         if calls:
-            return real(seg, slots, stamps, out, mask_out)
+            return real(rows, shard_of, slots, stamps, out, mask_out, at=at)
         calls.append(len(slots))
-        return real(seg, slots, stamps, out, mask_out,
+        return real(rows, shard_of, slots, stamps, out, mask_out, at=at,
                     on_copied=lambda: other.insert(make_batch(40, start=100), source_id=1))
 
     monkeypatch.setattr(replay_shm, "read_rows", read_then_overwrite)

@@ -7,10 +7,13 @@ calls, as for a client on another node) and redis (a private redis-server, appen
 everysec). Each reports inserts and samples per second and MB/s through the real service
 (Ray actors, limiter off), next to the raw limit for the same bytes: a numpy copy (memory)
 or redis-py pipelined SET / GET of one blob per sequence (redis; a raw sample also cuts its
-blobs into the batch arrays, and the GET alone is reported too). Figures are medians over
-rounds that alternate every variant at 1 and 2 shards and both raw limits, so machine load
-hits all alike (the cyclic GC paused while timing, since its pauses land on either side at
-random). After each observation kind's rows, one row of ratios per shard count (shm / redis,
+blobs into the batch arrays, and the GET alone is reported too, as is one pipeline reading a
+whole round's keys at once: `raw_ahead`, what the service's stock of samples does). Figures
+are medians over rounds that alternate every variant at 1 and 2 shards and both raw limits,
+so machine load hits all alike (the cyclic GC paused while timing, since its pauses land on
+either side at random); each round times a block of back-to-back calls per service
+(`calls_per_round`: inserts, samples), so costs paid once every few calls count at their
+share. After each observation kind's rows, one row of ratios per shard count (shm / redis,
 shm / actor calls) and one of 2-shard / 1-shard sample ratios. Also the memory per stored
 step against the raw bytes per step.
 """
@@ -41,6 +44,11 @@ def _batch(fields: dict[str, FieldSpec], n: int, start: int, rng: np.random.Gene
     data = {k: (rng.random((n, T, *s.shape)) * 200).astype(s.dtype) for k, s in fields.items()}
     ids = np.arange(start, start + n, dtype=np.int64)
     return SequenceBatch(data, np.ones((n, T), bool), np.zeros(n, np.int64), ids)
+
+
+def _renumbered(batch: SequenceBatch, start: int) -> SequenceBatch:
+    """The same arrays under episode ids start.. (inserts need not copy the bytes to differ)."""
+    return SequenceBatch(batch.data, batch.mask, batch.version, np.arange(start, start + len(batch), dtype=np.int64))
 
 
 def _time(fn) -> float:
@@ -142,12 +150,22 @@ def _cases(kind: str, shard_counts: list[int], quick: bool, run_dir: str) -> lis
     ins_batch = 32 if kind == "vector" else 8  # sequences per insert call
     sample_b = 32 if kind == "vector" else 16
     reps = (6 if quick else 64) if kind == "vector" else (4 if quick else 24)  # medians of many rounds
+    # each round times a block of back-to-back calls per service: a call's costs that come once
+    # every few calls (slots reserved ahead, draws asked ahead, a stock gathered for the next
+    # samples: `replay/stock.py`) are then inside every figure at their real share
+    ins_block = 4 if kind == "vector" else 2
+    smp_block = 32 if kind == "vector" else 4
+    # the actor-call path has no stock or draws ahead to spread; a short block keeps its ~4 ms
+    # calls from stretching every round (draws older than 1 s are dropped: `MAX_DRAW_AGE`)
+    smp_blocks = {"memory-actor": 4}
+    inserts = reps * ins_block + 1
     # 8x what the rounds insert: a shard holds well over 16 inserts' worth, so a client's
     # reservations ahead (at most 1/16 of a shard) cover several inserts, as in any real-sized
     # buffer (1M steps by default); only written rows take memory
-    capacity_seq = ins_batch * (reps + 1) * 8
+    capacity_seq = ins_batch * inserts * 8
     rng = np.random.default_rng(0)
-    batches = [_batch(fields, ins_batch, i * ins_batch, rng) for i in range(reps + 1)]
+    distinct = [_batch(fields, ins_batch, 0, rng) for _ in range(4)]  # arrays shared by the inserts
+    batches = [_renumbered(distinct[i % 4], i * ins_batch) for i in range(inserts)]
     seq_bytes = batches[0].nbytes / ins_batch
     services = [(label, backend, shm, S) for S in shard_counts for label, backend, shm in VARIANTS]
     clients: dict[tuple[str, int], object] = {}
@@ -166,28 +184,37 @@ def _cases(kind: str, shard_counts: list[int], quick: bool, run_dir: str) -> lis
         used = {key: r.info("memory")["used_memory"] for key, r in servers.items()}
         for c in clients.values():
             c.insert(batches[-1], source_id=0)  # warm up actors, connections and mappings
-            c.sample(sample_b)
+            for _ in range(smp_block):
+                c.sample(sample_b)
         raws = {"raw_numpy": _RawNumpy(batches[0], capacity_seq), "raw_redis": _RawRedis(rc, batches[0])}
         # rounds alternate every service and both raw limits on the same bytes, so load noise hits
         # all; the cyclic GC is paused while timing (its pauses land on any side at random)
         gc.collect()
         gc.disable()
-        for k in [*clients, *raws, "raw_redis_get"]:
+        for k in [*clients, *raws, "raw_redis_get", "raw_redis_ahead"]:
             ins[k], smp[k] = [], []
         order = list(clients.items())
+
+        def block(fn, n: int) -> float:  # seconds per call over n back-to-back calls
+            return _time(lambda: [fn(j) for j in range(n)]) / n
+
         for i in range(reps):
+            at = i * ins_block
             for key, c in _rotated(order, i):
-                ins[key].append(_time(lambda: c.insert(batches[i], source_id=i)))
+                ins[key].append(block(lambda j: c.insert(batches[at + j], source_id=at + j), ins_block))
             for k, raw in raws.items():
-                ins[k].append(_time(lambda: raw.put(batches[i], i)))
+                ins[k].append(block(lambda j: raw.put(batches[at + j], at + j), ins_block))
         stats = {key: c.stats() for key, c in clients.items()}
         used = {key: r.info("memory")["used_memory"] - used[key] for key, r in servers.items()}
         for i in range(reps):
+            at = i * smp_block
             for key, c in _rotated(order, i):
-                smp[key].append(_time(lambda: c.sample(sample_b)))
+                smp[key].append(block(lambda j: c.sample(sample_b), smp_blocks.get(key[0], smp_block)))
             for k, raw in raws.items():
-                smp[k].append(_time(lambda: raw.get(sample_b, i)))
-            smp["raw_redis_get"].append(_time(lambda: raws["raw_redis"].get_bytes(sample_b, i)))
+                smp[k].append(block(lambda j: raw.get(sample_b, at + j), smp_block))
+            smp["raw_redis_get"].append(block(lambda j: raws["raw_redis"].get_bytes(sample_b, at + j), smp_block))
+            # the raw limit reading a block's keys in one pipeline, as the service's stock does
+            smp["raw_redis_ahead"].append(_time(lambda: raws["raw_redis"].get(sample_b * smp_block, i)) / smp_block)
     finally:
         gc.enable()
         if "raw_redis" in raws:
@@ -206,11 +233,13 @@ def _cases(kind: str, shard_counts: list[int], quick: bool, run_dir: str) -> lis
         if backend == "memory":  # preallocated rings + index, per step of capacity
             mem = st["bytes"] / (st["capacity_sequences"] * T)
         else:  # redis-server's own accounting, per stored step (service records, + raw blobs on rc's)
-            blobs = reps * ins_batch if S == shard_counts[0] else 0
+            blobs = reps * ins_block * ins_batch if S == shard_counts[0] else 0
             mem = used[key] / ((st["size_sequences"] + blobs) * T)
         rows.append({
             "bench": "replay", "obs": kind, "shards": S, "backend": label, "seq_len": T,
-            "insert_batch": ins_batch, "sample_batch": sample_b, "rounds": reps, "seq_bytes": int(seq_bytes),
+            "insert_batch": ins_batch, "sample_batch": sample_b, "rounds": reps,
+            "calls_per_round": [ins_block, smp_blocks.get(label, smp_block)],
+            "seq_bytes": int(seq_bytes),
             "insert_seq_per_s": round(ins_sps[key], 1), "insert_mb_per_s": round(ins_sps[key] * mb, 1),
             "sample_seq_per_s": round(smp_sps[key], 1), "sample_mb_per_s": round(smp_sps[key] * mb, 1),
             "raw": "numpy copy" if raw == "raw_numpy" else "redis-py pipelined SET/GET",
@@ -218,7 +247,9 @@ def _cases(kind: str, shard_counts: list[int], quick: bool, run_dir: str) -> lis
             "insert_vs_raw": round(ins_sps[key] / ins_sps[raw], 3),
             "sample_vs_raw": round(smp_sps[key] / smp_sps[raw], 3),
             **({"raw_get_only_mb_per_s": round(smp_sps["raw_redis_get"] * mb, 1),
-                "sample_vs_raw_get_only": round(smp_sps[key] / smp_sps["raw_redis_get"], 3)}
+                "sample_vs_raw_get_only": round(smp_sps[key] / smp_sps["raw_redis_get"], 3),
+                "raw_ahead_sample_mb_per_s": round(smp_sps["raw_redis_ahead"] * mb, 1),
+                "sample_vs_raw_ahead": round(smp_sps[key] / smp_sps["raw_redis_ahead"], 3)}
                if raw == "raw_redis" else {}),
             **({"stale_reads": int(st.get("stale_reads", 0))} if label == "memory" else {}),
             "bytes_per_stored_step": round(mem, 1), "raw_bytes_per_step": round(raw_step, 1),

@@ -108,10 +108,10 @@ class DrawPools:
             p.clear()
         self.inflight.clear()
 
-    def take(self, B: int, rng: np.random.Generator, prefetch: bool = True):
+    def take(self, B: int, rng: np.random.Generator, prefetch: bool = True, ahead: int | None = None):
         """B draws split over shards by their latest size / mass reports -> (shard_of, slots,
         stamps, mass, keys, union size, union mass, newer) with arrays [B], or None if every
-        shard is empty."""
+        shard is empty. `ahead`: takes of this size to ask ahead for (default: the pools')."""
         pools, S = self.pools, len(self.pools)
         now = self.clock()
         for p in pools:
@@ -138,7 +138,8 @@ class DrawPools:
         n = sum(p.size for p in pools)
         taken = [(s, pools[s].take(k)) for s, k in enumerate(counts) if k > 0]
         if prefetch:  # read back by a later take, so it is there in time
-            want = [max(B, math.ceil(S * self.ahead * B * p.total / total)) for p in pools]
+            ahead = self.ahead if ahead is None else ahead
+            want = [max(B, math.ceil(S * ahead * B * p.total / total)) for p in pools]
             if any(len(p) < w and s not in self.inflight for s, (p, w) in enumerate(zip(pools, want))):
                 # one pool runs low: every shard not asked yet and below twice its share is asked
                 # now too, so their answers come back together and one fetch reads them all

@@ -26,6 +26,7 @@ import json
 import os
 import secrets
 import threading
+import time
 
 import numpy as np
 
@@ -36,6 +37,7 @@ from wmdist.replay.config import ReplayConfig
 from wmdist.replay.draws import DrawPools, is_weights
 from wmdist.replay.layout import layout_for, schema_of
 from wmdist.replay.shard import DROP_REASONS
+from wmdist.replay.stock import GatheredStock, Pace, batches_ahead
 from wmdist.replay.storage_redis import (
     RecordsMissing,
     commit_records,
@@ -93,6 +95,11 @@ class ReplayClient:
         self._gen, self._pool_gen = 0, 0
         self._layout = None  # the fields' RecordLayout (redis), built on first use
         self._draw_lock: threading.Lock | None = None
+        self._stock: GatheredStock | None = None  # rows gathered for the next samples (`replay/stock.py`)
+        self._pace = Pace()  # this copy's recent sample calls
+        self.gathers = 0  # row gathers this copy made on the drawn paths (one per stock)
+        self._seq_bytes = sum(int(np.prod(s.shape)) * np.dtype(s.dtype).itemsize for s in fields.values()) \
+            * cfg.seq_len + cfg.seq_len  # one sequence's rows and mask
         self._batches = 0  # rate-limited (learner) batches this copy sampled: anneals beta
         # memory backend: the shards' shared-memory segments, mapped in the process that uses
         # them (`replay_shm.ShmPath`); None where they are out of reach (rows go by actor call)
@@ -103,7 +110,8 @@ class ReplayClient:
     def __getstate__(self) -> dict:
         state = dict(self.__dict__)
         state.update(_server=None, _owner=False, _rng=None, _redis=None, _warm=False, _samples=None,
-                     _draws=None, _draw_lock=None, _layout=None, _inserts=None, _shm=None, _shm_tried=False,
+                     _draws=None, _draw_lock=None, _stock=None, _pace=Pace(), gathers=0, _layout=None, _inserts=None,
+                     _shm=None, _shm_tried=False,
                      _segments=[])
         return state
 
@@ -125,7 +133,7 @@ class ReplayClient:
     def _drop_shm(self) -> None:
         if self._shm is not None:
             self._shm.close()
-        self._shm, self._shm_tried = None, False
+        self._shm, self._shm_tried, self._stock = None, False, None
         if self._draws is not None:
             self._draws.clear()
 
@@ -302,25 +310,56 @@ class ReplayClient:
 
     def _sample_drawn(self, batch_size: int, limited: bool, fetch) -> Sample | None:
         """Redis backend and shared memory: draws from the pools (no shard round trip when the
-        prefetched draws are back), then `fetch` reads the rows (one MGET / numpy gathers)."""
+        prefetched draws are back), then `fetch` reads the rows (one MGET / one compiled copy). A
+        reader sampling back-to-back without writing gathers several batches at once and
+        serves the next ones from that stock (`wmdist/replay/stock.py`)."""
         if self._draw_lock is None:
             self._draw_lock = threading.Lock()
         with self._draw_lock:
-            got = self._take_draws(batch_size)
-            if got is None:
-                if not limited:
-                    return None
-                raise ValueError("replay is empty (min_size 0 and nothing inserted)")
-            shard_of, slots, stamps, mass, keys, n, total, newer = got
-            w = is_weights(mass, n, total, self._beta)
-            data, mask = fetch(keys, shard_of, slots, stamps, w, n, total, newer)
-        return Sample(data=data, mask=mask.astype(np.float32),
+            now = time.monotonic()
+            recent = self._pace.tick(now)
+            st = self._stock
+            if st is None or not st.serves(batch_size, self._gen, now, MAX_DRAW_AGE):
+                st = self._stock = None
+                steady = self._pool_gen == self._gen  # no write since the previous sample
+                k = batches_ahead(recent, batch_size * self._seq_bytes) if steady else 1
+                st = self._gather(k, batch_size, fetch, now)
+                if st is None:
+                    if not limited:
+                        return None
+                    raise ValueError("replay is empty (min_size 0 and nothing inserted)")
+                if k > 1:
+                    self._stock = st
+            cut = st.take(batch_size)
+            if st.left() < batch_size:
+                self._stock = None
+        w = is_weights(st.mass[cut], st.n, st.total, self._beta)
+        return Sample(data={f: v[cut] for f, v in st.data.items()}, mask=st.mask[cut],
                       is_weight=(w / w.max()).astype(np.float32),  # normalised by the batch max
-                      keys=make_keys(shard_of, slots), stamps=stamps,
-                      age=step_ages(newer, mask, len(self.shards)))
+                      keys=make_keys(st.shard_of[cut], st.slots[cut]), stamps=st.stamps[cut], age=st.age[cut])
 
-    def _take_draws(self, B: int):
-        """B draws from the per-shard pools (`draws.DrawPools`: a shard call on this path only
+    def _gather(self, k: int, batch_size: int, fetch, now: float) -> GatheredStock | None:
+        """k batches' draws and their rows in one go; None while every shard is empty."""
+        got = self._take_draws(k * batch_size, ahead=max(4, PREFETCH_SAMPLES // k))
+        if got is None:
+            return None
+        self.gathers += 1
+        shard_of, slots, stamps, mass, keys, n, total, newer = got
+        if k > 1 and shard_of[0] != shard_of[-1]:
+            # the draws come in one block per shard: shuffled, so each batch served from the stock
+            # mixes the shards as an i.i.d. sample of the union does (the fetch reads rows in any
+            # shard order at the same cost; one batch needs no shuffle)
+            perm = self.rng.permutation(shard_of.size)
+            shard_of, slots, stamps, mass, newer = (a[perm] for a in (shard_of, slots, stamps, mass, newer))
+            keys = [keys[i] for i in perm] if keys else keys
+        else:
+            slots, stamps, mass, newer = slots.copy(), stamps.copy(), mass.copy(), newer.copy()  # redraws rewrite them
+        data, mask = fetch(keys, shard_of, slots, stamps, mass, newer)
+        return GatheredStock(data, mask.astype(np.float32), step_ages(newer, mask, len(self.shards)), shard_of, slots,
+                             stamps, mass, n, total, batch_size, self._gen, now)
+
+    def _take_draws(self, n: int, ahead: int = PREFETCH_SAMPLES):
+        """n draws from the per-shard pools (`draws.DrawPools`: a shard call on this path only
         when a pool runs short, usually the request sent ahead). When this copy wrote since its
         previous sample, the pools are voided (read your writes) and nothing is asked ahead,
         since the next write (e.g. a priority update each learner step) would void it too."""
@@ -331,9 +370,9 @@ class ReplayClient:
         if not steady:  # this copy wrote since these were drawn: they may not reflect it
             self._draws.clear()
             self._pool_gen = self._gen
-        return self._draws.take(B, self.rng, prefetch=steady)
+        return self._draws.take(n, self.rng, prefetch=steady, ahead=ahead)
 
-    def _fetch_direct(self, keys, shard_of, slots, stamps, w, n, total, newer):
+    def _fetch_direct(self, keys, shard_of, slots, stamps, mass, newer):
         """One MGET of the drawn records. Rows whose record is gone or undecodable are reported
         to their shard (which drops and counts them unless the slot was rewritten since the
         draw, i.e. evicted) and drawn again from the same shard."""
@@ -356,14 +395,13 @@ class ReplayClient:
                 for f in self.fields:
                     data[f][rows] = d2[f]
                 mask[rows] = m2
-                slots[rows], stamps[rows], newer[rows] = g["slots"], g["stamps"], g["newer"]
-                w[rows] = is_weights(g["mass"], n, total, self._beta)
+                slots[rows], stamps[rows], newer[rows], mass[rows] = g["slots"], g["stamps"], g["newer"], g["mass"]
                 again.append(rows[np.union1d(miss2, corr2)])
             redo = np.concatenate(again)
         raise RuntimeError("replay: could not read a batch from redis after 100 redraws")
 
-    def _fetch_shm(self, keys, shard_of, slots, stamps, w, n, total, newer):
-        """Numpy gathers from the mapped segments; a row rewritten since its draw (evicted,
+    def _fetch_shm(self, keys, shard_of, slots, stamps, mass, newer):
+        """Rows copied from the mapped segments; a row rewritten since its draw (evicted,
         or written meanwhile) is drawn again from its shard, which counts it (`stale_reads`)."""
         path = self._shm
 
@@ -374,8 +412,7 @@ class ReplayClient:
                 raise StaleSegment(f"replay shard {s} serves another shared-memory segment")
             if len(g["slots"]) < rows.size:
                 raise ValueError(f"replay shard {s} is empty")
-            slots[rows], stamps[rows], newer[rows] = g["slots"], g["stamps"], g["newer"]
-            w[rows] = is_weights(g["mass"], n, total, self._beta)
+            slots[rows], stamps[rows], newer[rows], mass[rows] = g["slots"], g["stamps"], g["newer"], g["mass"]
 
         return path.gather(self.fields, self.cfg.seq_len, shard_of, slots, stamps, redraw)
 

@@ -22,7 +22,7 @@ from wmdist.replay.batch import SequenceBatch
 from wmdist.replay.reservations import Reservations
 from wmdist.replay.shard_shm import LEASE_USE_SECONDS
 from wmdist.replay.shm import H_CLOSED, ShmSegment, ShmUnavailable
-from wmdist.replay.shm_rows import commit_rows, read_rows, write_rows
+from wmdist.replay.shm_rows import ShmRows, commit_rows, read_rows, write_rows
 from wmdist.runtime.calls import get, is_local
 
 AHEAD_SHARE = 16  # a client reserves ahead at most 1/16 of a shard's slots (its last insert's share)
@@ -46,6 +46,7 @@ class ShmPath:
         self.last = [0] * len(shards)  # rows of the latest insert into each shard
         self.ahead = capacity // AHEAD_SHARE
         self.broken = False  # a shard answered for another segment: the client reconnects
+        self.rows: ShmRows | None = None  # the segments' row sources, made at the first read
 
     @classmethod
     def connect(cls, shards: list, fields: dict[str, FieldSpec], seq_len: int, capacity: int) -> "ShmPath | None":
@@ -67,6 +68,7 @@ class ShmPath:
         return cls(shards, segs, capacity)
 
     def close(self) -> None:
+        self.rows = None  # its views first, so the mappings can close
         for s in self.segs:
             s.close()
         self.segs = []
@@ -141,39 +143,19 @@ class ShmPath:
     def gather(self, fields: dict[str, FieldSpec], seq_len: int, shard_of: np.ndarray, slots: np.ndarray,
                stamps: np.ndarray, redraw: Callable[[int, np.ndarray], None]
                ) -> tuple[dict[str, np.ndarray], np.ndarray]:
-        """The drawn rows -> (fields [B, T, ...], mask [B, T] bool). Rows found rewritten are
-        drawn again by `redraw(shard, rows)`, which replaces `slots` and `stamps` at `rows`."""
+        """The drawn rows, from any shards in any order -> (fields [B, T, ...], mask [B, T]
+        bool). Rows found rewritten are drawn again by `redraw(shard, rows)`, which replaces
+        `slots` and `stamps` at `rows`."""
         B = len(slots)
         data = {f: np.empty((B, seq_len, *s.shape), np.dtype(s.dtype)) for f, s in fields.items()}
         mask = np.empty((B, seq_len), bool)
-        # the draws come in one block per shard: each block is gathered in place
-        edges = [0, *(np.flatnonzero(shard_of[1:] != shard_of[:-1]) + 1).tolist(), B]
-        todo = np.concatenate([np.zeros(0, np.int64)] + [
-            self._read(int(shard_of[lo]), np.arange(lo, hi), slots, stamps, data, mask)
-            for lo, hi in zip(edges[:-1], edges[1:]) if hi > lo])
+        if self.rows is None or self.rows.fields != list(fields):
+            self.rows = ShmRows(self.segs, list(fields))
+        todo = read_rows(self.rows, shard_of, slots, stamps, data, mask)
         for _ in range(100):
             if todo.size == 0:
                 return data, mask
-            again = [np.zeros(0, np.int64)]
             for s in np.unique(shard_of[todo]):
-                rows = todo[shard_of[todo] == s]
-                redraw(int(s), rows)
-                again.append(self._read(int(s), rows, slots, stamps, data, mask))
-            todo = np.concatenate(again)
+                redraw(int(s), todo[shard_of[todo] == s])
+            todo = todo[read_rows(self.rows, shard_of[todo], slots[todo], stamps[todo], data, mask, at=todo)]
         raise RuntimeError("replay: rows kept changing under 100 reads (shards rewriting faster than reads)")
-
-    def _read(self, s: int, rows: np.ndarray, slots: np.ndarray, stamps: np.ndarray, data: dict[str, np.ndarray],
-              mask: np.ndarray) -> np.ndarray:
-        """Rows `rows` (ascending) of the batch from shard s; returns those that changed."""
-        seg, n, lo = self.segs[s], rows.size, int(rows[0])
-        if rows[-1] - lo == n - 1:  # one block of the batch (the usual case): gathered in place
-            hi = lo + n
-            return rows[read_rows(seg, slots[lo:hi], stamps[lo:hi], {f: a[lo:hi] for f, a in data.items()},
-                                  mask[lo:hi])]
-        tmp = {f: np.empty((n, *a.shape[1:]), a.dtype) for f, a in data.items()}
-        tmask = np.empty((n, mask.shape[1]), bool)
-        bad = read_rows(seg, slots[rows], stamps[rows], tmp, tmask)
-        for f, a in tmp.items():
-            data[f][rows] = a
-        mask[rows] = tmask
-        return rows[bad]
