@@ -126,6 +126,11 @@ class Learner(ABC):
     def get_weights(self) -> Weights:
         """The parameters collectors and reanalyzers need, as numpy arrays."""
 
+    def get_eval_weights(self) -> Weights | None:
+        """Other parameters for the evaluator and checkpoints (e.g. an average of the weights
+        that only they act on), or None: they get `get_weights`."""
+        return None
+
     @abstractmethod
     def state_dict(self) -> dict[str, Any]:
         """Everything to resume exactly: parameters, optimizer state, counters."""

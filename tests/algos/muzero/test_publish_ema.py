@@ -57,3 +57,34 @@ def test_zero_decay_publishes_the_learner_weights_and_the_average_survives_a_che
     c.load_state_dict(plain.state_dict())
     for k, v in _own(plain).items():
         np.testing.assert_array_equal(c.get_weights()[k], v)
+
+
+def test_publish_ema_to_eval_gives_the_average_to_the_evaluator_alone():
+    from wmdist.runtime.calls import LocalHandle, put
+    from wmdist.runtime.roles.weights import WeightBroker, pull
+
+    rng = np.random.default_rng(3)
+    shared = small_algo(publish_ema=0.8).make_learner()
+    ev = small_algo(publish_ema=0.8, publish_ema_to="eval").make_learner()
+    ev.load_state_dict(shared.state_dict())
+    assert shared.get_eval_weights() is None  # "all": everyone acts on the average
+    for _ in range(3):
+        batch = random_batch(rng, 8, 12, 3)
+        torch.manual_seed(0); shared.update(batch)
+        torch.manual_seed(0); ev.update(batch)
+    for k, v in _own(ev).items():  # collectors and reanalyzers: the learner's own weights
+        np.testing.assert_array_equal(ev.get_weights()[k], v)
+    average = ev.get_eval_weights()
+    for k, v in shared.get_weights().items():  # the evaluator: the same average "all" publishes
+        np.testing.assert_allclose(average[k], v, rtol=1e-6, atol=1e-7)
+    # through the broker as the learner role publishes them: one pull each way
+    broker = LocalHandle(WeightBroker())
+    broker.publish.remote(7, [put(ev.get_weights(), local=True), put(average, local=True)])
+    _, actors = pull(broker, -1)
+    version, judged = pull(broker, -1, evaluator=True)
+    assert version == 7
+    k = next(iter(average))
+    np.testing.assert_array_equal(actors[k], ev.get_weights()[k])
+    np.testing.assert_array_equal(judged[k], average[k])
+    broker.publish.remote(8, [put(ev.get_weights(), local=True)])  # no evaluator weights: the shared ones
+    np.testing.assert_array_equal(pull(broker, 7, evaluator=True)[1][k], ev.get_weights()[k])

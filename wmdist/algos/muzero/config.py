@@ -45,6 +45,10 @@ class MuZeroConfig:
     publish_ema: float = param(0.0, "decay per update of an exponential moving average of the weights that actors, "
                                      "reanalyzers, the evaluator and checkpoints get (Polyak averaging; not in the "
                                      "papers); 0 publishes the learner's own weights", ge=0, lt=1)
+    publish_ema_to: str = param("all", "who acts on that average: all (collectors, reanalyzers, evaluator, checkpoints) "
+                                       "or eval (the evaluator and checkpoints; collectors and reanalyzers act on the "
+                                       "learner's own weights, so the data and targets do not lag)",
+                                choices=("all", "eval"))
     value_loss_weight: float = param(1.0, "weight of the value loss (Reanalyze paper: 0.25)", ge=0)
     reward_loss_weight: float = param(1.0, "weight of the reward loss", ge=0)
     policy_loss_weight: float = param(1.0, "weight of the policy loss", ge=0)

@@ -124,7 +124,14 @@ class MuZeroLearner(Learner):
             polyak_(self.ema_net, self.net, 1.0 - self.cfg.publish_ema)
 
     def get_weights(self) -> Weights:
-        return to_numpy_weights(self.ema_net if self.ema_net is not None else self.net)
+        shared = self.ema_net is not None and self.cfg.publish_ema_to == "all"
+        return to_numpy_weights(self.ema_net if shared else self.net)
+
+    def get_eval_weights(self) -> Weights | None:
+        """publish_ema_to=eval: the average, for the evaluator and checkpoints only."""
+        if self.ema_net is not None and self.cfg.publish_ema_to == "eval":
+            return to_numpy_weights(self.ema_net)
+        return None
 
     def state_dict(self) -> dict[str, Any]:
         return {

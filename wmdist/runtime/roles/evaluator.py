@@ -74,7 +74,7 @@ class EvaluatorRole:
 
     def evaluate(self) -> dict:
         t0 = time.monotonic()
-        version, weights = pull(self.broker, self.version)
+        version, weights = pull(self.broker, self.version, evaluator=True)
         if weights is not None:
             self.policy.set_weights(weights, version)
             self.version, self.weights = version, weights

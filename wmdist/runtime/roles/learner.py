@@ -91,11 +91,16 @@ class LearnerRole:
         return self.prefetcher
 
     def publish(self) -> int:
-        """One `ray.put` per version; the broker hands its ref to every puller."""
+        """One `ray.put` per version (two when the evaluator gets its own weights); the broker
+        hands the refs to every puller."""
         from wmdist.runtime.calls import get, is_local, put
 
-        ref = put(self.learner.get_weights(), local=is_local(self.broker))
-        get(self.broker.publish.remote(self.version, [ref]))
+        local = is_local(self.broker)
+        box = [put(self.learner.get_weights(), local=local)]
+        ev = self.learner.get_eval_weights()
+        if ev is not None:
+            box.append(put(ev, local=local))
+        get(self.broker.publish.remote(self.version, box))
         self.replay.set_policy_version(self.version)  # replay drops data older than max_policy_lag
         return self.version
 
@@ -162,7 +167,9 @@ class LearnerRole:
                 "nan_skips": self.nan_skips, "sampled_sequences": self.sampled_sequences}
 
     def weights(self) -> tuple[int, dict]:
-        return self.version, self.learner.get_weights()
+        """The weights a checkpoint keeps: the evaluator's when it gets its own."""
+        ev = self.learner.get_eval_weights()
+        return self.version, self.learner.get_weights() if ev is None else ev
 
     def load(self, state: dict) -> int:
         self.learner.load_state_dict(state["learner"])

@@ -6,9 +6,10 @@ from typing import Any
 
 
 class WeightBroker:
-    """A tiny Ray actor: (version, [ObjectRef]) of the newest snapshot.
+    """A tiny Ray actor: (version, [ObjectRef, ...]) of the newest snapshot: the actors' weights,
+    then optionally the evaluator's own (`Learner.get_eval_weights`).
 
-    The ref travels inside a list so Ray hands the reference itself, not its value.
+    The refs travel inside a list so Ray hands the references themselves, not their values.
     """
 
     def __init__(self) -> None:
@@ -29,11 +30,13 @@ class WeightBroker:
         return self.version
 
 
-def pull(broker: Any, known_version: int, timeout: float | None = 30.0) -> tuple[int, dict | None]:
-    """(version, weights) if a newer snapshot than `known_version` exists, else (version, None)."""
+def pull(broker: Any, known_version: int, timeout: float | None = 30.0,
+         evaluator: bool = False) -> tuple[int, dict | None]:
+    """(version, weights) if a newer snapshot than `known_version` exists, else (version, None).
+    With `evaluator`, the evaluator's own weights where the learner published them."""
     from wmdist.runtime.calls import get
 
     version, box = get(broker.latest.remote(known_version), timeout=timeout)
     if not box:
         return version, None
-    return version, get(box[0], timeout=timeout)
+    return version, get(box[1] if evaluator and len(box) > 1 else box[0], timeout=timeout)
