@@ -131,3 +131,11 @@ def test_a_write_of_the_reader_ends_its_stock(started, backend):
         got = c.sample(8)
         hit = np.isin(got.keys, s.keys)
         assert np.all(got.data["root_value"][hit] == 7.0)
+
+
+def test_sample_ahead_1_gathers_every_sample_itself(started):
+    c = started(_cfg("memory", sample_ahead=1))
+    assert c.insert(make_batch(20), source_id=0)
+    for _ in range(30):
+        c.sample(8)
+    assert c.gathers == 30

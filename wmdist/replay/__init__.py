@@ -3,7 +3,8 @@
 Pieces: `writer.SequenceWriter` (steps -> fixed windows, in collectors), `shard.ReplayShard`
 (index + `sumtree.SumTree` sampler + storage), `storage_memory` / `storage_redis`,
 `shard_shm.ShmShard` (a shard living in a `shm.ShmSegment`, with `storage_shm`,
-`shm_rows`, `reservations`), `limiter.RateLimiter`, `codec` (msgpack arrays, never pickle),
+`shm_rows`, `rowcopy`, `reservations`), `stock` (samples gathered ahead for a reader),
+`limiter.RateLimiter`, `codec` (msgpack arrays, never pickle),
 `redis_server` (private server launcher). The Ray actors and the client are
 `wmdist/runtime/replay_{actor,client,shm}.py`.
 
@@ -18,7 +19,8 @@ Where the bytes go (a Ray actor call costs ~1-5 ms and copies what it carries):
   read; a shard killed and restarted by Ray re-attaches the segment and indexes them too,
   so it loses no acknowledged sequence. Uncommitted reservations (a killed collector) are
   holes, never indexed. A sample takes draws from the same pools as redis (below), then
-  gathers the rows itself with numpy from the mapped segments, checking each slot's stamp
+  copies the rows itself from the mapped segments (`rowcopy.RowSource`: every array of
+  every shard in one compiled call, rows in the batch's order), checking each slot's stamp
   and generation before and after the copy (a seqlock: a row rewritten meanwhile is drawn
   again, counted as `stale_reads`).
 - memory backend through actor calls (`replay.shm` off, a client on another node than the
@@ -43,6 +45,11 @@ Where the bytes go (a Ray actor call costs ~1-5 ms and copies what it carries):
   records, decoded for the whole batch (`layout.RecordLayout.decode_many`). A client's own
   insert or write-back voids its pools (read your writes); draws are at most a second old
   (counted from the request); a pooled draw whose record was evicted since is drawn again.
+- Both drawn paths (shared memory, redis): a reader that samples back-to-back without
+  writing gathers up to 32 batches at once (as many as its sample calls of the last 0.25 s,
+  at most 8 MB) and serves the next samples as views of them (`stock.GatheredStock`); its
+  next write or the draws' age limit ends the stock, and with several shards the stock's
+  draws are shuffled so every batch served is an i.i.d. sample of the union.
 - Both: an insert waits for the rate limiter only when the ratio or `max_policy_lag` is
   on, a sample only while the ratio is on or `min_size` is not reached yet; otherwise the
   counts gate nothing and are summed and sent without waiting at most every 50 ms

@@ -43,6 +43,10 @@ class ReplayConfig:
     redis_appendfsync: str = param(
         "everysec", "private redis-server AOF fsync policy", choices=("always", "everysec", "no"))
     redis_aof: bool = param(True, "private redis-server keeps an append-only file (durable across restarts)")
+    sample_ahead: int = param(
+        32, "most batches a reader that samples back-to-back without writing gathers at once and serves from "
+            "memory (as many as its sample calls of the last 0.25 s, at most 8 MB; wmdist/replay/stock.py); 1 = every "
+            "sample draws and reads its own rows", ge=1, le=256)
     shard_cpus: float = param(0.1, "Ray CPU share of each shard actor", gt=0)
     resources: dict = param(
         {}, "custom Ray resources of each shard actor and of the limiter, e.g. {replay: 1} to keep replay on the "

@@ -322,7 +322,7 @@ class ReplayClient:
             if st is None or not st.serves(batch_size, self._gen, now, MAX_DRAW_AGE):
                 st = self._stock = None
                 steady = self._pool_gen == self._gen  # no write since the previous sample
-                k = batches_ahead(recent, batch_size * self._seq_bytes) if steady else 1
+                k = batches_ahead(recent, batch_size * self._seq_bytes, self.cfg.sample_ahead) if steady else 1
                 st = self._gather(k, batch_size, fetch, now)
                 if st is None:
                     if not limited:
