@@ -24,7 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-MAX_BATCHES = 32  # samples one gather serves at most
+MAX_BATCHES = 32  # samples one gather serves at most (the default of `replay.sample_ahead`)
 BUDGET_BYTES = 8 << 20  # rows one stock holds at most
 HORIZON = 0.25  # seconds of the reader's recent pace one stock covers at most
 

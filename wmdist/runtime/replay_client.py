@@ -96,7 +96,7 @@ class ReplayClient:
         self._layout = None  # the fields' RecordLayout (redis), built on first use
         self._draw_lock: threading.Lock | None = None
         self._stock: GatheredStock | None = None  # rows gathered for the next samples (`replay/stock.py`)
-        self._pace = Pace()  # this copy's recent sample calls
+        self._pace = Pace(most=cfg.sample_ahead)  # this copy's recent sample calls, counted up to sample_ahead
         self.gathers = 0  # row gathers this copy made on the drawn paths (one per stock)
         self._seq_bytes = sum(int(np.prod(s.shape)) * np.dtype(s.dtype).itemsize for s in fields.values()) \
             * cfg.seq_len + cfg.seq_len  # one sequence's rows and mask
@@ -110,8 +110,8 @@ class ReplayClient:
     def __getstate__(self) -> dict:
         state = dict(self.__dict__)
         state.update(_server=None, _owner=False, _rng=None, _redis=None, _warm=False, _samples=None,
-                     _draws=None, _draw_lock=None, _stock=None, _pace=Pace(), gathers=0, _layout=None, _inserts=None,
-                     _shm=None, _shm_tried=False,
+                     _draws=None, _draw_lock=None, _stock=None, _pace=Pace(most=self.cfg.sample_ahead), gathers=0,
+                     _layout=None, _inserts=None, _shm=None, _shm_tried=False,
                      _segments=[])
         return state
 
@@ -320,18 +320,15 @@ class ReplayClient:
             recent = self._pace.tick(now)
             st = self._stock
             if st is None or not st.serves(batch_size, self._gen, now, MAX_DRAW_AGE):
-                st = self._stock = None
                 steady = self._pool_gen == self._gen  # no write since the previous sample
                 k = batches_ahead(recent, batch_size * self._seq_bytes, self.cfg.sample_ahead) if steady else 1
-                st = self._gather(k, batch_size, fetch, now)
+                st = self._stock = self._gather(k, batch_size, fetch, now)
                 if st is None:
                     if not limited:
                         return None
                     raise ValueError("replay is empty (min_size 0 and nothing inserted)")
-                if k > 1:
-                    self._stock = st
             cut = st.take(batch_size)
-            if st.left() < batch_size:
+            if st.left() < batch_size:  # (a stock of one batch is done at once)
                 self._stock = None
         w = is_weights(st.mass[cut], st.n, st.total, self._beta)
         return Sample(data={f: v[cut] for f, v in st.data.items()}, mask=st.mask[cut],
