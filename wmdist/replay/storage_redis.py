@@ -41,6 +41,7 @@ import numpy as np
 import redis
 
 from wmdist.algos.base import FieldSpec
+from wmdist.replay import resp
 from wmdist.replay.batch import SequenceBatch
 from wmdist.replay.codec import CodecError, encode_record
 from wmdist.replay.layout import RecordLayout, layout_for, schema_of
@@ -140,16 +141,17 @@ def commit_records(r: redis.Redis, writes: list[tuple[str, dict[str, bytes], byt
     returns; under `appendfsync always` redis replies after the fsync that covers every
     command before. A crash before the announcement leaves records nothing names: the
     shard's next `load` deletes them (counted `unacked`)."""
-    p = r.pipeline(transaction=False)  # (records may be empty: an insert whose rows all lagged)
-    records = {k: v for _, recs, _ in writes for k, v in recs.items()}
-    if records and sum(map(len, records.values())) <= BIG_WRITE:
-        p.mset(records)  # small: one command parses and runs cheaper than one per record
+    keys = [[k.encode() for k in recs] for _, recs, _ in writes]  # each encoded once, used twice
+    records = [(k, v) for ks, (_, recs, _) in zip(keys, writes) for k, v in zip(ks, recs.values())]
+    cmds: list[tuple] = []  # (records may be empty: an insert whose rows all lagged)
+    if records and sum(len(v) for _, v in records) <= BIG_WRITE:
+        # small: one command parses and runs cheaper than one per record
+        cmds.append((b"MSET", *[x for kv in records for x in kv]))
     else:
-        for k, v in records.items():
-            p.set(k, v)  # big: redis runs each record's SET while the next is still on the wire
-    for ns, recs, entry in writes:
-        p.eval(_ANNOUNCE, len(recs) + 1, *recs, f"{ns}:pending", entry)
-    replies = p.execute()  # raises: not acknowledged (announced or not, it is never half-visible)
+        cmds += [(b"SET", k, v) for k, v in records]  # big: each runs while the next is on the wire
+    cmds += [(b"EVAL", _ANNOUNCE, len(ks) + 1, *ks, f"{ns}:pending", entry)
+             for ks, (ns, _, entry) in zip(keys, writes)]
+    replies = resp.execute(r, cmds)  # raises: not acknowledged (announced or not, it is never half-visible)
     return [i for i, ok in enumerate(replies[len(replies) - len(writes):]) if ok != 1]
 
 
