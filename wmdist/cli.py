@@ -231,6 +231,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     from wmdist.config.errors import ConfigError
 
     args = _parser().parse_args(argv)
+    if args.command == "train" and argv is None:
+        from wmdist.runtime import own_session
+
+        if own_session.wanted():  # the driver in a session of its own: see own_session.py
+            return own_session.run_relayed(own_session.wmdist_command(sys.argv[1:]))
     try:
         return COMMANDS[args.command](args)
     except (ConfigError, UsageError, FileNotFoundError) as err:

@@ -186,3 +186,46 @@ def test_sigterm_on_the_memory_backend_checkpoints_and_exits_143(tmp_path):
     assert final["updates"] >= before["updates"]
     assert (latest_checkpoint(run_dir) / "replay").is_dir()
     assert f"wmdist train --resume {run_dir}" in run.text
+
+
+@pytest.mark.slow
+def test_sigterm_to_the_whole_process_group_still_checkpoints(tmp_path):
+    """`timeout`, `kill -TERM -PGID`, Slurm's scancel: SIGTERM to every process of the group.
+    Ray's GCS and raylet were in that group and died with it, so the driver hung 60 s and
+    exited 1 with no final checkpoint. The driver now runs in a session of its own behind a
+    relay (`runtime/own_session.py`): the run ends as a SIGTERM to the driver does, and
+    nothing of the run's Ray instance is left behind."""
+    run = Train(FAKE, "--set", f"run.dir={tmp_path}", *RUN)
+    try:
+        run_dir = run.run_dir()
+        run.wait_for(lambda: _checkpoint_after(run_dir, 0), label="a first checkpoint")
+        before = load_counters(latest_checkpoint(run_dir))
+        time.sleep(1.0)
+        session = _session_of(run.proc.pid)  # the driver and Ray's processes
+        assert session and session != [run.proc.pid]
+        os.killpg(run.proc.pid, signal.SIGTERM)  # Train starts the command as its group's leader
+        rc = run.proc.wait(60)
+        run.reader.join(5)
+    finally:
+        if run.proc.poll() is None:
+            run.kill()
+    assert rc == 143, run.text
+    assert "checkpoint written" in run.text and "Traceback" not in run.text and "GCS" not in run.text
+    final = load_counters(latest_checkpoint(run_dir))
+    assert final["updates"] >= before["updates"]
+    assert f"wmdist train --resume {run_dir}" in run.text
+    assert all(_wait_gone(p) for p in session), "processes of the run's session left running"
+
+
+def _session_of(leader: int) -> list[int]:
+    """Pids of the session the relay `leader` started its driver in (the driver, Ray's processes)."""
+    kids = [int(p) for p in Path(f"/proc/{leader}/task/{leader}/children").read_text().split()]
+    out = []
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        if kids and int(fields[3]) == kids[0]:  # field 6 of stat: the session id
+            out.append(int(stat.parent.name))
+    return out
