@@ -120,3 +120,17 @@ def test_killing_the_relay_takes_the_child_with_it(tmp_path):
     relay.wait(10)
     assert _gone(child), "the child outlived its relay"
     assert _signals(log) == []
+
+
+def test_a_driver_killed_outright_is_one_line_and_128_plus_the_signal(tmp_path):
+    (tmp_path / "child.py").write_text(CHILD)
+    log = tmp_path / "signals.log"
+    relay = subprocess.Popen([sys.executable, "-c", RELAY, str(tmp_path / "child.py"), str(log), "-"],
+                             start_new_session=True, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 30
+    while time.monotonic() < deadline and not (log.exists() and log.read_text().startswith("ready")):
+        time.sleep(0.05)
+    os.kill(int(log.read_text().split()[1]), signal.SIGKILL)  # the OOM killer's way
+    _, err = relay.communicate(timeout=10)
+    assert relay.returncode == 137
+    assert err.strip().splitlines() == [err.strip()] and "killed by SIGKILL" in err and "--resume" in err

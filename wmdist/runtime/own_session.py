@@ -75,4 +75,9 @@ def run_relayed(command: Sequence[str]) -> int:
     finally:
         for s, h in previous.items():
             signal.signal(s, h)
-    return rc if rc >= 0 else 128 - rc
+    if rc < 0:  # killed outright (the kernel's OOM killer, kill -9 on the driver): say so
+        name = signal.Signals(-rc).name if -rc in signal.Signals._value2member_map_ else f"signal {-rc}"
+        print(f"wmdist: the driver was killed by {name}; resume from its run directory's last checkpoint "
+              f"with `wmdist train --resume RUN_DIR`", file=sys.stderr, flush=True)
+        return 128 - rc
+    return rc
