@@ -76,6 +76,12 @@ class Train:
         self.reader.join(5)
         return rc
 
+    def exit_status(self, timeout: float) -> int:
+        """Wait for the command to end (its output read to the last line)."""
+        rc = self.proc.wait(timeout)
+        self.reader.join(5)
+        return rc
+
     def kill(self) -> None:
         self.proc.kill()
         self.proc.wait(30)
@@ -164,37 +170,15 @@ def test_redis_run_survives_a_killed_server_a_killed_driver_and_ctrl_c(tmp_path)
 
 
 @pytest.mark.slow
-def test_sigterm_on_the_memory_backend_checkpoints_and_exits_143(tmp_path):
-    """`kill PID` / `docker stop` (SIGTERM to the driver alone) end a run the way Ctrl-C does
+@pytest.mark.parametrize("to_group", [False, True], ids=["driver", "process-group"])
+def test_sigterm_on_the_memory_backend_checkpoints_and_exits_143(tmp_path, to_group):
+    """`kill PID` / `docker stop` (SIGTERM to the command alone) end a run the way Ctrl-C does
     (the redis test above): a final checkpoint with the replay, exit status 143 (128 +
-    SIGTERM), no traceback, and the resume command. Ray's own driver handler would abort."""
-    run = Train(FAKE, "--set", f"run.dir={tmp_path}", *RUN)
-    try:
-        run_dir = run.run_dir()
-        run.wait_for(lambda: _checkpoint_after(run_dir, 0), label="a first checkpoint")
-        before = load_counters(latest_checkpoint(run_dir))
-        time.sleep(1.0)
-        run.proc.send_signal(signal.SIGTERM)
-        rc = run.proc.wait(120)
-        run.reader.join(5)
-    finally:
-        if run.proc.poll() is None:
-            run.kill()
-    assert rc == 143, run.text
-    assert "interrupted" in run.text and "Traceback" not in run.text and "SIGTERM received" not in run.text
-    final = load_counters(latest_checkpoint(run_dir))
-    assert final["updates"] >= before["updates"]
-    assert (latest_checkpoint(run_dir) / "replay").is_dir()
-    assert f"wmdist train --resume {run_dir}" in run.text
-
-
-@pytest.mark.slow
-def test_sigterm_to_the_whole_process_group_still_checkpoints(tmp_path):
-    """`timeout`, `kill -TERM -PGID`, Slurm's scancel: SIGTERM to every process of the group.
-    Ray's GCS and raylet were in that group and died with it, so the driver hung 60 s and
-    exited 1 with no final checkpoint. The driver now runs in a session of its own behind a
-    relay (`runtime/own_session.py`): the run ends as a SIGTERM to the driver does, and
-    nothing of the run's Ray instance is left behind."""
+    SIGTERM), no traceback, and the resume command. Ray's own driver handler would abort.
+    `timeout`, `kill -TERM -PGID`, Slurm's scancel send it to the whole process group: Ray's
+    GCS and raylet were in that group and died with it, so the driver hung 60 s and exited 1
+    with no final checkpoint. The driver now runs in a session of its own behind a relay
+    (`runtime/own_session.py`), so both end alike, and nothing of the run's Ray is left."""
     run = Train(FAKE, "--set", f"run.dir={tmp_path}", *RUN)
     try:
         run_dir = run.run_dir()
@@ -202,19 +186,64 @@ def test_sigterm_to_the_whole_process_group_still_checkpoints(tmp_path):
         before = load_counters(latest_checkpoint(run_dir))
         time.sleep(1.0)
         session = _session_of(run.proc.pid)  # the driver and Ray's processes
-        assert session and session != [run.proc.pid]
-        os.killpg(run.proc.pid, signal.SIGTERM)  # Train starts the command as its group's leader
-        rc = run.proc.wait(60)
-        run.reader.join(5)
+        assert session and run.proc.pid not in session
+        if to_group:
+            os.killpg(run.proc.pid, signal.SIGTERM)  # Train starts the command as its group's leader
+        else:
+            run.proc.send_signal(signal.SIGTERM)
+        rc = run.exit_status(60)
     finally:
         if run.proc.poll() is None:
             run.kill()
     assert rc == 143, run.text
-    assert "checkpoint written" in run.text and "Traceback" not in run.text and "GCS" not in run.text
+    assert "interrupted" in run.text and "checkpoint written" in run.text
+    assert not any(s in run.text for s in ("Traceback", "SIGTERM received", "GCS"))
     final = load_counters(latest_checkpoint(run_dir))
     assert final["updates"] >= before["updates"]
+    assert (latest_checkpoint(run_dir) / "replay").is_dir()
     assert f"wmdist train --resume {run_dir}" in run.text
     assert all(_wait_gone(p) for p in session), "processes of the run's session left running"
+
+
+@pytest.mark.slow
+def test_a_killed_learner_is_started_again_from_the_latest_checkpoint(tmp_path):
+    """The learner's process killed (the kernel's OOM killer, a crash): a new learner starts
+    from the latest checkpoint and the run goes on (counted in the checkpoint's restarts);
+    once `learner.max_restarts` are used up, the next death ends the run in one line that
+    names the resume command."""
+    run = Train(FAKE, "--set", f"run.dir={tmp_path}", *RUN, "learner.max_restarts=1")
+    try:
+        run_dir = run.run_dir()
+        first = run.wait_for(lambda: _checkpoint_after(run_dir, 0), label="a first checkpoint")
+        session = _session_of(run.proc.pid)
+        old = run.wait_for(lambda: _role_pid(session, "LearnerRole"), label="the learner's process")
+        os.kill(old, signal.SIGKILL)
+        # a checkpoint after the restart holds the new learner's updates beyond the first's
+        later = run.wait_for(lambda: (c := _checkpoint_after(run_dir, first["updates"]))
+                             and c["restarts"].get("learner", 0) == 1 and c, label="a checkpoint after the restart")
+        new = _role_pid(_session_of(run.proc.pid), "LearnerRole")
+        assert new and new != old and later["env_steps"] >= first["env_steps"]
+        os.kill(new, signal.SIGKILL)  # its one restart is used: the run ends
+        rc = run.exit_status(120)
+    finally:
+        if run.proc.poll() is None:
+            run.kill()
+    assert rc == 1, run.text
+    err = [ln for ln in run.lines if ln.startswith("wmdist: error:")]
+    assert len(err) == 1 and "the learner's process died" in err[0] and "learner.max_restarts=1" in err[0]
+    assert f"wmdist train --resume {run_dir}" in err[0] and "Traceback" not in run.text
+
+
+def _role_pid(session: list[int], role: str) -> int | None:
+    """The pid of the run's Ray worker that runs actor class `role` (its title is `ray::ROLE...`)."""
+    for pid in session:
+        try:
+            title = Path(f"/proc/{pid}/cmdline").read_bytes().split(b"\0")[0].decode()
+        except OSError:
+            continue
+        if title.startswith(f"ray::{role}"):
+            return pid
+    return None
 
 
 def _session_of(leader: int) -> list[int]:

@@ -53,6 +53,10 @@ class LearnerConfig:
     prefetch: int = param(2, "batches sampled ahead in a background thread", ge=1, le=16)
     max_nan_streak: int = param(20, "stop after this many non-finite updates in a row", ge=1)
     sample_timeout: float = param(1.0, "seconds one sample call may wait on the limiter before re-checking for stop", gt=0)
+    max_restarts: int = param(
+        3, "times a learner whose process died (killed, out of memory, crashed) is started again in the same run "
+           "from the latest checkpoint (or afresh before the first), losing only the updates since; replay, "
+           "collectors and counters go on. 0 = the run stops with the resume command instead", ge=0)
 
 
 @dataclass

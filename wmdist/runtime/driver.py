@@ -21,6 +21,7 @@ import numpy as np
 
 from wmdist.runtime.calls import get, wait
 from wmdist.runtime.checkpoint import save_checkpoint
+from wmdist.runtime.faults import death as _death
 from wmdist.runtime.faults import died as _died
 from wmdist.runtime.faults import failed_to_start as _failed_to_start
 from wmdist.runtime.faults import one_line as _one_line
@@ -189,6 +190,38 @@ class Driver:
         limit = self.roles[kind].max_restarts(self.cfg)
         return limit >= 0 and self.deaths[(kind, i)] > limit
 
+    def _restart_learner(self, err: BaseException) -> bool:
+        """The learner's process died (Ray does not restart it: a new process would start from
+        random weights). Start a new one from the latest checkpoint, or afresh before the first,
+        publishing versions past the dead one's; replay, collectors and counters go on. False
+        when `learner.max_restarts` are used up (or on the Ray-free local runner)."""
+        from wmdist.runtime.checkpoint import latest_checkpoint, load_learner_state
+
+        used = self.c.restarts.get("learner", 0)
+        if self.topo.local or used >= self.cfg.learner.max_restarts:
+            return False
+        ckpt = latest_checkpoint(self.topo.run_dir)
+        log.warning("the learner's process died (%s); starting a new one from %s", _death(err),
+                    ckpt.name if ckpt is not None else "scratch (no checkpoint yet)")
+        try:
+            newest = int(get(self.topo.broker.current_version.remote(), timeout=60))
+            learner = self.topo.replace("learner", 0)
+            if ckpt is not None:
+                get(learner.load.remote(load_learner_state(ckpt), newest + 1), timeout=600)
+            else:
+                get(learner.publish_from.remote(newest + 1), timeout=600)
+        except Exception:  # noqa: BLE001 - it will not come back: the run stops with the resume line
+            log.exception("the learner could not be started again")
+            return False
+        self.c.restarts["learner"] = used + 1
+        self._issue("learner", 0)
+        return True
+
+    def _learner_death(self, err: BaseException) -> str:
+        used, most = self.c.restarts.get("learner", 0), self.cfg.learner.max_restarts
+        tail = (f"; it was started again {used} times (learner.max_restarts={most})" if most else "")
+        return f"the learner's process died ({_death(err)}){tail}"
+
     def _reissue(self, kind: str, i: int) -> None:
         if self.stop_reason is not None:
             return
@@ -265,6 +298,11 @@ class Driver:
                     except Exception as err:  # noqa: BLE001 - classified below
                         log.error("%s %d: a call failed:\n%s", kind, i, err)  # the remote traceback, for the log
                         if self.roles[kind].fatal:
+                            if kind == "learner" and _died(err) and not _failed_to_start(err):
+                                if self._restart_learner(err):
+                                    continue
+                                self.stop_reason = ("learner_failed", self._learner_death(err))
+                                break
                             self.stop_reason = (f"{kind}_failed", f"the {kind} failed: {_one_line(err)}")
                             break
                         if _failed_to_start(err):  # a restart would fail the same way

@@ -53,6 +53,17 @@ def out_of_memory(err: BaseException) -> str | None:
             f"other jobs on the machine, or lower learner.batch_size / replay.capacity_steps")
 
 
+def death(err: BaseException) -> str:
+    """Why an actor's process died, briefly (Ray's text is a paragraph of possible causes)."""
+    oom = out_of_memory(err)
+    if oom:
+        return oom
+    kind = re.search(r"Worker exit type: (\w+)", str(err))
+    if kind and kind.group(1) == "SYSTEM_ERROR":
+        return "killed by a signal, by the kernel's OOM killer, or crashed; Ray's worker logs say which"
+    return one_line(err)
+
+
 def root_cause(err: BaseException) -> str:
     """The last 'SomeError: message' line of a remote traceback, else the last line."""
     oom = out_of_memory(err)

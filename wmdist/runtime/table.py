@@ -76,7 +76,7 @@ class Role:
     schedule: str = LOOP
     call: Callable[[Any, "Driver"], Any] | None = None  # issue one call on an actor; returns its ref
     handle: Callable[["Driver", int, dict], None] | None = None  # fold one answer into the driver's state
-    fatal: bool = False  # a failed call ends the run (the learner: nothing to restart it from but a checkpoint)
+    fatal: bool = False  # a failed call ends the run (the learner), unless its process died: `Driver._restart_learner`
     drain: bool = True  # the driver waits for its in-flight call at the end (its data lands)
     options: dict = field(default_factory=dict)  # more actor options (max_concurrency)
     owner: str = "topology"  # who creates its actors: "topology", or "replay" (create_replay)

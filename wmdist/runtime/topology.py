@@ -95,6 +95,18 @@ class Topology:
         ev = self.actors.get("evaluator", [])
         return ev[0] if ev else None
 
+    def replace(self, name: str, i: int) -> Any:
+        """A new actor i of role `name` in place of one whose process died and that Ray will not
+        bring back (the learner: `max_restarts` 0, since a restart would lose its state anyway)."""
+        role = self.role(name)
+        try:
+            kill(self.actors[name][i])  # dead already; its resources must be free for the new one
+        except Exception:  # noqa: BLE001
+            pass
+        ctx = Context(self.cfg, self.spec, self.replay, self.broker, self.actors)
+        self.actors[name][i] = _start(role, ctx, i, role.resources_of(self.cfg), self.local)
+        return self.actors[name][i]
+
     def shutdown(self) -> None:
         try:
             get(self.learner.close.remote(), timeout=10)

@@ -171,14 +171,22 @@ class LearnerRole:
         ev = self.learner.get_eval_weights()
         return self.version, self.learner.get_weights() if ev is None else ev
 
-    def load(self, state: dict) -> int:
+    def load(self, state: dict, min_version: int = 0) -> int:
+        """Restore a checkpoint's state; weights are published as version >= `min_version` (a
+        learner restarted mid-run must publish newer versions than its dead predecessor did,
+        or the broker and collectors would keep the old ones)."""
         self.learner.load_state_dict(state["learner"])
         self.updates = int(state["updates"])
-        self.version = int(state["version"])
+        self.version = max(int(state["version"]), min_version)
         self.nan_skips = int(state.get("nan_skips", 0))
         self.sampled_sequences = int(state.get("sampled_sequences", 0))
         self.publish()
         return self.version
+
+    def publish_from(self, min_version: int) -> int:
+        """Publish these weights as version >= `min_version` (a learner started afresh mid-run)."""
+        self.version = max(self.version, min_version)
+        return self.publish()
 
     def close(self) -> None:
         if self.prefetcher is not None:
