@@ -234,6 +234,29 @@ def test_a_killed_learner_is_started_again_from_the_latest_checkpoint(tmp_path):
     assert f"wmdist train --resume {run_dir}" in err[0] and "Traceback" not in run.text
 
 
+@pytest.mark.slow
+def test_killed_weight_broker_and_limiter_come_back_and_the_run_goes_on(tmp_path):
+    """The weight broker and the rate limiter hold nothing a restart cannot rebuild (the newest
+    snapshot's refs; counts, and the size the shards report): Ray restarts them, calls made
+    meanwhile are retried, and the run keeps training and checkpointing (was: a dead broker
+    failed the learner's next publish and ended the run; a dead limiter stalled it)."""
+    run = Train(FAKE, "--set", f"run.dir={tmp_path}", *RUN, "replay.min_size=200")
+    try:
+        run_dir = run.run_dir()
+        first = run.wait_for(lambda: _checkpoint_after(run_dir, 0), label="a first checkpoint")
+        session = _session_of(run.proc.pid)
+        for role in ("WeightBroker", "LimiterActor"):
+            os.kill(run.wait_for(lambda role=role: _role_pid(session, role), label=role), signal.SIGKILL)
+        later = run.wait_for(lambda: (c := _checkpoint_after(run_dir, first["updates"] + 20))
+                             and c["env_steps"] > first["env_steps"] and c, label="training after both died")
+        assert later["version"] > first["version"]  # weights still published through the new broker
+        rc = run.ctrl_c()
+    finally:
+        if run.proc.poll() is None:
+            run.kill()
+    assert rc == 130 and "Traceback" not in run.text, run.text
+
+
 def _role_pid(session: list[int], role: str) -> int | None:
     """The pid of the run's Ray worker that runs actor class `role` (its title is `ray::ROLE...`)."""
     for pid in session:

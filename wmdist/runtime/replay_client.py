@@ -593,7 +593,7 @@ def create_replay(cfg: ReplayConfig, fields: dict[str, FieldSpec], run_dir: str,
             limiter = LocalHandle(limiter_role.actor()(*limiter_args))
         else:
             shards = [_remote(shard_role, cfg).remote(*a) for a in shard_args]
-            limiter = _remote(limiter_role, cfg).remote(*limiter_args)
+            limiter = _remote(limiter_role, cfg).remote(*limiter_args, shards)
         sizes = get([s.mass.remote() for s in shards])  # also waits for redis shards to rebuild
     except Exception:
         if server is not None:

@@ -169,9 +169,11 @@ BUILTIN: tuple[Role, ...] = (
     Role("replay", _shard_cls, lambda cfg: cfg.replay, lambda cfg: cfg.replay.shards,
          lambda sec: RoleResources(sec.shard_cpus, custom=dict(sec.resources)), schedule=SERVICE,
          options={"max_concurrency": 8, "max_task_retries": 3}, owner="replay", metrics=()),
+    # the limiter's state is counts: Ray restarts it (its calls retried on the new process), and it
+    # takes its size from the shards again (`LimiterActor`)
     Role("limiter", _limiter_cls, lambda cfg: cfg.replay, lambda cfg: 1,
-         lambda sec: RoleResources(0.0, custom=dict(sec.resources)), schedule=SERVICE, max_restarts=lambda cfg: 0,
-         options={"max_concurrency": 64}, owner="replay", metrics=()),
+         lambda sec: RoleResources(0.0, custom=dict(sec.resources)), schedule=SERVICE,
+         options={"max_concurrency": 64, "max_task_retries": -1}, owner="replay", metrics=()),
     Role("learner", _learner_cls, lambda cfg: cfg.learner, lambda cfg: 1, _sized,
          args=lambda ctx, i, res: (ctx.cfg, ctx.spec, ctx.replay, ctx.broker, res.threads, dict(ctx.actors)),
          max_restarts=lambda cfg: 0, schedule=LOOP, fatal=True, options={"max_concurrency": 1}, ready_first=True,

@@ -161,7 +161,10 @@ def build(cfg: RunConfig, spec: EnvSpec, run_dir: Path, fields: dict, local: boo
 
         # the broker lives on the driver's node: losing any other node must not lose the weights' route
         here = NodeAffinitySchedulingStrategy(ray.get_runtime_context().get_node_id(), soft=False)
-        broker = ray.remote(WeightBroker).options(num_cpus=BROKER_CPUS, scheduling_strategy=here).remote()
+        # a broker whose process died is restarted, its calls retried there: it holds only the newest
+        # snapshot's refs, and the learner's next publish (every learner.publish_every updates) refills it
+        broker = ray.remote(WeightBroker).options(num_cpus=BROKER_CPUS, scheduling_strategy=here, max_restarts=-1,
+                                                  max_task_retries=-1).remote()
     topo = Topology(cfg, spec, run_dir, replay, broker, table, local=local)
     ctx = Context(cfg, spec, replay, broker, topo.actors)
     try:

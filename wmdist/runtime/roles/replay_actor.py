@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import os
 import threading
+from typing import Any
 
 import numpy as np
 
@@ -118,9 +119,18 @@ class ShardActor:
 
 
 class LimiterActor:
-    def __init__(self, samples_per_insert: float, min_size: int, error_buffer: float) -> None:
+    def __init__(self, samples_per_insert: float, min_size: int, error_buffer: float,
+                 shards: list[Any] | None = None) -> None:
+        """With `shards` (Ray), a limiter Ray restarts after its process died starts from their
+        stored size, so `min_size` does not hold the learner back again; its ratio counts start
+        afresh (the band's slack absorbs that) and the policy version returns with the
+        learner's next publish."""
         self.limiter = RateLimiter(samples_per_insert, min_size, error_buffer)
         self.version = -1  # latest learner policy version (-1 = none published yet)
+        if shards:
+            from wmdist.runtime.calls import get
+
+            self.limiter.set_size(sum(int(m[2]) for m in get([s.mass.remote() for s in shards], timeout=300)))
 
     def acquire_insert(self, n: int, timeout: float | None) -> tuple[bool, int]:
         return self.limiter.acquire_insert(n, timeout), self.version
