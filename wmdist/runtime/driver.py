@@ -236,11 +236,15 @@ class Driver:
 
     # -- services ------------------------------------------------------------------------
     def _revive_services(self) -> None:
-        """Restart the private redis-server if it died (same port and AOF); counted."""
+        """Restart the private redis-server if it died (same port and AOF); give a limiter Ray
+        restarted its size back; both counted."""
         try:
             if self.topo.replay.revive_server():
                 self.c.restarts["redis"] = self.c.restarts.get("redis", 0) + 1
                 log.warning("the private redis-server died; restarted at %s from its AOF", self.topo.replay.server_url)
+            if self.topo.replay.resync_limiter():
+                self.c.restarts["limiter"] = self.c.restarts.get("limiter", 0) + 1
+                log.warning("the replay's rate limiter was restarted; its size taken from the shards again")
         except Exception as err:  # noqa: BLE001 - it will not come back: the outage clock decides
             self._replay_outage(err)
 

@@ -444,6 +444,15 @@ class ReplayClient:
         self._gen += 1
         return applied
 
+    def resync_limiter(self) -> bool:
+        """Give a limiter Ray restarted the shards' stored size again (the driver asks every
+        second). True when it had to."""
+        if self._closed or get(self.limiter.sized.remote(), timeout=30):
+            return False
+        sizes = get([s.mass.remote() for s in self.shards], timeout=300)
+        get(self.limiter.set_size.remote(sum(int(m[2]) for m in sizes)))
+        return True
+
     def set_policy_version(self, version: int) -> None:
         """The learner's latest published version (drives `max_policy_lag`). Waited for: the
         limiter is a threaded actor, so a later call of this client could otherwise overtake it."""
@@ -593,7 +602,7 @@ def create_replay(cfg: ReplayConfig, fields: dict[str, FieldSpec], run_dir: str,
             limiter = LocalHandle(limiter_role.actor()(*limiter_args))
         else:
             shards = [_remote(shard_role, cfg).remote(*a) for a in shard_args]
-            limiter = _remote(limiter_role, cfg).remote(*limiter_args, shards)
+            limiter = _remote(limiter_role, cfg).remote(*limiter_args)
         sizes = get([s.mass.remote() for s in shards])  # also waits for redis shards to rebuild
     except Exception:
         if server is not None:

@@ -169,8 +169,8 @@ BUILTIN: tuple[Role, ...] = (
     Role("replay", _shard_cls, lambda cfg: cfg.replay, lambda cfg: cfg.replay.shards,
          lambda sec: RoleResources(sec.shard_cpus, custom=dict(sec.resources)), schedule=SERVICE,
          options={"max_concurrency": 8, "max_task_retries": 3}, owner="replay", metrics=()),
-    # the limiter's state is counts: Ray restarts it (its calls retried on the new process), and it
-    # takes its size from the shards again (`LimiterActor`)
+    # the limiter's state is counts: Ray restarts it (its calls retried on the new process), and
+    # the driver gives it the shards' size again (`ReplayClient.resync_limiter`)
     Role("limiter", _limiter_cls, lambda cfg: cfg.replay, lambda cfg: 1,
          lambda sec: RoleResources(0.0, custom=dict(sec.resources)), schedule=SERVICE,
          options={"max_concurrency": 64, "max_task_retries": -1}, owner="replay", metrics=()),

@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import os
 import threading
-from typing import Any
 
 import numpy as np
 
@@ -119,18 +118,15 @@ class ShardActor:
 
 
 class LimiterActor:
-    def __init__(self, samples_per_insert: float, min_size: int, error_buffer: float,
-                 shards: list[Any] | None = None) -> None:
-        """With `shards` (Ray), a limiter Ray restarts after its process died starts from their
-        stored size, so `min_size` does not hold the learner back again; its ratio counts start
-        afresh (the band's slack absorbs that) and the policy version returns with the
-        learner's next publish."""
+    def __init__(self, samples_per_insert: float, min_size: int, error_buffer: float) -> None:
+        """A limiter Ray restarted after its process died reports `sized()` False until its
+        owner gives it the shards' stored size again (`ReplayClient.resync_limiter`), so
+        `min_size` does not hold the learner back again; its ratio counts start afresh (the
+        band's slack absorbs that) and the policy version returns with the learner's next
+        publish."""
         self.limiter = RateLimiter(samples_per_insert, min_size, error_buffer)
         self.version = -1  # latest learner policy version (-1 = none published yet)
-        if shards:
-            from wmdist.runtime.calls import get
-
-            self.limiter.set_size(sum(int(m[2]) for m in get([s.mass.remote() for s in shards], timeout=300)))
+        self._sized = False
 
     def acquire_insert(self, n: int, timeout: float | None) -> tuple[bool, int]:
         return self.limiter.acquire_insert(n, timeout), self.version
@@ -148,6 +144,10 @@ class LimiterActor:
 
     def set_size(self, size_steps: int) -> None:
         self.limiter.set_size(size_steps)
+        self._sized = True
+
+    def sized(self) -> bool:
+        return self._sized
 
     def set_version(self, version: int) -> None:
         self.version = max(self.version, int(version))
@@ -158,6 +158,7 @@ class LimiterActor:
     def load_state_dict(self, state: dict) -> None:
         self.limiter.load_state_dict(state)
         self.version = int(state.get("version", -1))
+        self._sized = True
 
     def stats(self) -> dict[str, float]:
         return {**self.limiter.stats(), "policy_version": float(self.version)}
