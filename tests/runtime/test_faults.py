@@ -239,6 +239,8 @@ def test_killed_services_and_learner_come_back_until_the_learners_restarts_are_u
     assert rc == 1, run.text
     err = [ln for ln in run.lines if ln.startswith("wmdist: error:")]
     assert len(err) == 1 and "the learner's process died" in err[0] and "learner.max_restarts=1" in err[0]
+    # Ray's paragraphs on each death go to the run's log, not the console
+    assert "(raylet)" not in run.text and "Ray: " in (run_dir / "wmdist.log").read_text()
     assert f"wmdist train --resume {run_dir}" in err[0] and "Traceback" not in run.text
 
 

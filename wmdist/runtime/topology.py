@@ -32,6 +32,7 @@ def start_ray(cfg: RunConfig) -> None:
         return
     if cfg.ray.address:
         ray.init(address=cfg.ray.address, log_to_driver=True, configure_logging=False)
+        _ray_notices_to_log()
         return
     kwargs: dict[str, Any] = {
         "address": "local",  # a fresh embedded instance, never someone else's running cluster
@@ -48,7 +49,35 @@ def start_ray(cfg: RunConfig) -> None:
     # The raylet reads this when it starts and applies it to every worker it spawns.
     os.environ["RAY_worker_niceness"] = str(cfg.ray.worker_niceness)
     ray.init(**kwargs)
+    _ray_notices_to_log()
     _log_where_ray_logs()
+
+
+def _ray_notices_to_log() -> None:
+    """Ray's notices to the driver ("(raylet) A worker died...", "Task ... will be retried")
+    go to the run's wmdist.log instead of the console: they are paragraphs, and the driver
+    already reports each restart on its progress line (`restarts learner 1`). A private hook
+    (the function Ray's error listener prints with); without it the notices stay on the console."""
+    import logging
+
+    try:
+        import ray._private.worker as ray_worker
+
+        show = ray_worker.print_to_stdstream
+    except (ImportError, AttributeError):
+        return
+    if getattr(show, "wmdist_to_log", False):
+        return
+
+    def to_log(data: dict, ignore_prefix: bool) -> None:
+        if data.get("pid") != "raylet":
+            show(data, ignore_prefix)
+            return
+        for line in data.get("lines", []):
+            logging.getLogger("wmdist").warning("Ray: %s", line)
+
+    to_log.wmdist_to_log = True  # type: ignore[attr-defined]
+    ray_worker.print_to_stdstream = to_log
 
 
 def _log_where_ray_logs() -> None:
