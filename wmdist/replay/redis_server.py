@@ -22,9 +22,10 @@ import time
 
 import redis
 
+from wmdist.runtime.parent_death import signal_on_parent_death
+
 PASSWORD_FILE = "redis.pass"
 PID_FILE = "redis.pid"
-_PR_SET_PDEATHSIG = 1  # prctl(2) option: signal this process when its parent thread dies
 
 
 def free_port() -> int:
@@ -40,14 +41,9 @@ def _write_private(path: str, text: str) -> None:
     os.chmod(path, 0o600)
 
 
-def _die_with_parent() -> None:
-    """In the child before exec (Linux): SIGTERM when the parent dies."""
-    import ctypes
-
-    try:
-        ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, signal.SIGTERM, 0, 0, 0)
-    except (OSError, AttributeError):  # not Linux: the pid file still lets a resume stop it
-        pass
+# in the child before exec: SIGTERM when the parent dies (elsewhere than Linux the pid file
+# still lets a resume stop it)
+_die_with_parent = signal_on_parent_death(signal.SIGTERM)
 
 
 def _serves(pid: int, directory: str) -> bool:

@@ -64,7 +64,7 @@ def connect(url: str, password_file: str = "") -> redis.Redis:
 # redis-py sends every argument above 6,000 bytes as its own write (one syscall each): an insert
 # of 32 vector records (~6.2 KB each) made ~65 of them, a quarter of its time. Joined up to
 # 64 KiB, it makes ~4; records larger than that (pixels) still go out uncopied, one write each.
-SEND_CHUNK = 64 << 10
+SEND_CHUNK = resp.CHUNK  # 64 KiB, the same as the replay's own packing (`resp.pack`)
 
 
 def _bulk_class(cls: type) -> type:

@@ -20,19 +20,13 @@ import subprocess
 import sys
 from collections.abc import Sequence
 
+from wmdist.runtime.parent_death import signal_on_parent_death
+
 CHILD_ENV = "WMDIST_DRIVER_SESSION"  # set in the child: it is the driver, it starts no relay
-_PR_SET_PDEATHSIG = 1
 RELAYED = {signal.SIGINT: signal.SIGINT, signal.SIGTERM: signal.SIGTERM, signal.SIGHUP: signal.SIGTERM}
 
 
-def _die_with_relay() -> None:
-    """In the child before exec (Linux): SIGKILL when the relay dies, as if one process."""
-    import ctypes
-
-    try:
-        ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
-    except (OSError, AttributeError):
-        pass
+_die_with_relay = signal_on_parent_death(signal.SIGKILL)  # in the child: as if one process with the relay
 
 
 def wanted() -> bool:
