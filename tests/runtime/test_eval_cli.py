@@ -129,6 +129,11 @@ def test_board_bench_on_connect4_plays_the_runs_uct_opponent_and_plots_games_won
     assert res["games"] == 4 and res["won_fraction"] == res["won"] / 4
     assert "lost_lines" not in res  # the whole-tree judge is for tic-tac-toe only
     assert png.stat().st_size > 1000
+    versus = tmp_path / "old.jsonl"
+    versus.write_text('{"net": "old", "minutes": 2.0, "won": 0.05}\n{"net": "old", "minutes": 4.0, "won": null}\n')
+    both = tmp_path / "both.png"
+    assert board_main([str(run_dir), "--games", "2", "--png", str(both), "--versus", str(versus)]) == 0
+    assert both.stat().st_size > png.stat().st_size // 2
 
 
 def _one_line_exit_2(capsys, argv: list[str]) -> str:

@@ -10,7 +10,8 @@ rollouts per move). Prints one JSON line with the counts (and `won_fraction`); f
 tic-tac-toe it also judges the checkpoint over every opponent line. `--png` plots the
 in-training evaluations against env steps: games lost to the solver (tic-tac-toe) or the
 share of games won (connect four); `--lines-png` the lines lost per evaluation
-(`eval_lost_lines`) against wall-clock minutes.
+(`eval_lost_lines`) against wall-clock minutes; `--versus JSONL` plots connect four's share
+won against minutes beside other runs' curves.
 """
 from __future__ import annotations
 
@@ -60,6 +61,36 @@ def plot_won(metrics: Path, png: Path, title: str) -> None:
               "mean outcome (+1 won, 0 drawn, -1 lost)", title, png)
 
 
+def plot_won_minutes(metrics: Path, versus: Path, png: Path, title: str, label: str) -> None:
+    """Share of games won per evaluation against wall-clock minutes, this run beside the
+    curves in `versus` (JSON lines with `net`, `minutes` and `won`, as docs/bench keeps them)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    series: dict[str, tuple[list, list]] = {}
+    for r in read_jsonl(versus):
+        if r.get("won") is not None:
+            xs, ys = series.setdefault(r["net"], ([], []))
+            xs.append(r["minutes"])
+            ys.append(r["won"])
+    ev = [r for r in read_jsonl(metrics) if r.get("kind") == "eval" and r.get("eval_won") is not None]
+    series[label] = ([r["time"] / 60.0 for r in ev], [r["eval_won"] for r in ev])
+    fig, ax = plt.subplots(figsize=(7, 3.5))
+    for name, (xs, ys) in series.items():
+        ax.plot(xs, ys, marker=".", label=name)
+    ax.set_xlabel("wall-clock minutes")
+    ax.set_ylabel("share of games won")
+    ax.set_ylim(-0.03, 1.03)
+    ax.set_title(title)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    png.parent.mkdir(parents=True, exist_ok=True)
+    fig.tight_layout()
+    fig.savefig(png, dpi=90)
+
+
 def opponent_name(game: str, rollouts: int) -> str:
     return "the exact solver" if game == "tictactoe" else f"UCT ({rollouts} rollouts per move)"
 
@@ -87,6 +118,8 @@ def _main(argv: list[str] | None) -> int:
     p.add_argument("--games", type=int, default=200)
     p.add_argument("--png", default=None)
     p.add_argument("--lines-png", default=None, help="plot the in-training judge's lost lines per evaluation")
+    p.add_argument("--versus", default=None, help="with --png, connect four: plot games won against minutes beside "
+                                                  "the curves in this JSON-lines file (net, minutes, won)")
     p.add_argument("--simulations", type=int, default=0,
                    help="search simulations per move (default: the run's eval.num_simulations, else its search's)")
     a = p.parse_args(argv)
@@ -117,6 +150,10 @@ def _main(argv: list[str] | None) -> int:
     if a.png and game == "tictactoe":
         plot_losses(Path(a.run_dir) / "metrics.jsonl", cfg.eval.episodes, Path(a.png),
                     f"{cfg.env.id}: games lost to the exact solver per evaluation")
+    elif a.png and a.versus:
+        label = f"this run ({getattr(cfg.algo, 'tree_model', 'learned')} model in the tree)"
+        plot_won_minutes(Path(a.run_dir) / "metrics.jsonl", Path(a.versus), Path(a.png),
+                         f"{cfg.env.id}: games won against {opponent_name(game, rollouts)}", label)
     elif a.png:
         plot_won(Path(a.run_dir) / "metrics.jsonl", Path(a.png),
                  f"{cfg.env.id}: games won against {opponent_name(game, rollouts)} per evaluation")

@@ -8,6 +8,7 @@ from wmdist.algos.base import Weights
 from wmdist.algos.muzero.config import MuZeroConfig
 from wmdist.algos.muzero.networks import MLPNet, MuZeroNet
 from wmdist.algos.muzero.networks_conv import ConvNet
+from wmdist.algos.muzero.rules_model import rules_for
 from wmdist.envs.spec import EnvSpec
 
 
@@ -19,6 +20,8 @@ def check_spec(spec: EnvSpec, cfg: MuZeroConfig) -> None:
         raise ValueError(f"muzero supports 1 or 2 players, {spec.id} has {spec.players}")
     if cfg.augment_symmetries and not spec.symmetries:
         raise ValueError(f"algo.augment_symmetries needs a board game with declared symmetries; {spec.id} has none")
+    if cfg.tree_model == "rules":
+        rules_for(spec)
     kind = network_kind(spec, cfg)
     if kind == "conv" and len(spec.obs_shape) != 3:
         raise ValueError(f"algo.network=conv needs (H, W, C) image observations, {spec.id} has {spec.obs_shape}")

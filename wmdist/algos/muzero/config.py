@@ -36,6 +36,11 @@ class MuZeroConfig:
     value_support: int = param(300, "value atoms cover the integers [-S, S] after h(x) (paper: 300)", ge=1)
     reward_support: int = param(300, "reward atoms cover the integers [-S, S] after h(x) (paper: 300)", ge=1)
 
+    tree_model: str = param("learned", "what the search plans with: learned = MuZero's dynamics network; rules = the "
+                                       "env's true rules (board games only: AlphaZero's perfect model; the network then "
+                                       "evaluates each searched position from its observation)",
+                            choices=("learned", "rules"))
+
     # learning targets and loss
     unroll_steps: int = param(5, "K: dynamics steps unrolled per sample (paper: 5)", ge=1)
     td_steps: int = param(10, "n of the n-step value target (paper: 10 Atari, 5 Reanalyze; board games: >= game length)", ge=1)
@@ -73,6 +78,9 @@ class MuZeroConfig:
         if self.search.value_prefix and not self.has_value_prefix_net():
             raise ValueError("algo.search.value_prefix needs a network with a value-prefix head (LSTM); "
                              "muzero's has none (use algo.name: efficientzero)")
+        if self.search.value_prefix and self.tree_model == "rules":
+            raise ValueError("algo.search.value_prefix predicts rewards with a learned model; algo.tree_model=rules "
+                             "takes them from the rules (set one of them)")
         if self.search.gumbel and self.greedy_fraction > 0:
             raise ValueError("algo.greedy_fraction has no effect with algo.search.gumbel (sequential halving chooses "
                              "every action); set one of them")

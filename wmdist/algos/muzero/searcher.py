@@ -10,6 +10,8 @@ import torch
 
 from wmdist.algos.muzero.fast_mlp import FastMLPInference
 from wmdist.algos.muzero.networks import MuZeroNet
+from wmdist.algos.muzero.rules_model import RulesModel
+from wmdist.envs.boardgames.rules_batch import BatchRules
 from wmdist.nets.support import support_to_scalar
 from wmdist.search.api import SearchConfig, search
 
@@ -28,7 +30,7 @@ class Searcher:
     """Runs `wmdist.search.search` with `net` as the model; counts network time."""
 
     def __init__(self, net: MuZeroNet, cfg: SearchConfig, value_support: int, reward_support: int,
-                 two_player: bool, device: torch.device) -> None:
+                 two_player: bool, device: torch.device, rules: BatchRules | None = None) -> None:
         self.net, self.cfg = net, cfg
         self.value_support, self.reward_support = value_support, reward_support
         self.two_player = two_player
@@ -40,6 +42,8 @@ class Searcher:
         # the MLP network's recurrent call as flat functional ops (bit-identical, ~2x cheaper on the CPU);
         # None: the module path
         self.fast = FastMLPInference.build(net, value_support, reward_support) if self.on_host else None
+        # rules: the tree steps true positions and the network only evaluates them (algo.tree_model)
+        self.rules_model = RulesModel(rules, self._evaluate) if rules is not None else None
         if cfg.value_prefix and not net.has_value_prefix:
             raise ValueError("algo.search.value_prefix needs a network with a value-prefix head (algo.name: efficientzero)")
 
@@ -74,6 +78,16 @@ class Searcher:
         self._net_seconds += time.perf_counter() - t
         return reward, value, logits, self._out(nxt)
 
+    def _evaluate(self, obs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Rules mode: the network's value [B] and policy logits [B, A] of true positions."""
+        t = time.perf_counter()
+        with torch.no_grad():
+            _, p_logits, v_logits = self.net.initial_inference(torch.as_tensor(obs, device=self.device))
+            value = support_to_scalar(v_logits.float(), self.value_support).cpu().numpy()
+            logits = p_logits.float().cpu().numpy()
+        self._net_seconds += time.perf_counter() - t
+        return value, logits
+
     def _in(self, x: torch.Tensor) -> torch.Tensor:
         """A gathered host latent onto the network's device (a no-op on the CPU)."""
         return x if self.on_host else x.to(self.device, non_blocking=True)
@@ -96,6 +110,8 @@ class Searcher:
         if self.cfg.value_prefix:  # the LSTM state lives with each node's latent in the tree
             latent, fn = (latent, *self.net.initial_state(len(obs_t), self.device)), self._recurrent_prefix
         latent = tuple(self._out(x) for x in latent) if isinstance(latent, tuple) else self._out(latent)
+        if self.rules_model is not None:
+            latent, fn = self.rules_model.root(obs), self.rules_model
         out = search(latent, root_logits, root_value, legal, to_play, fn, self.cfg, rng,
                      temperature=temperature, add_noise=add_noise, two_player=self.two_player)
         counts = np.asarray(out.visit_counts, dtype=np.float32)

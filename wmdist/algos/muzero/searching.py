@@ -9,6 +9,7 @@ from wmdist.algos.base import Weights
 from wmdist.algos.muzero.build import load_numpy_weights
 from wmdist.algos.muzero.config import MuZeroConfig
 from wmdist.algos.muzero.networks import MuZeroNet
+from wmdist.algos.muzero.rules_model import rules_for
 from wmdist.algos.muzero.searcher import Searcher
 from wmdist.envs.spec import EnvSpec
 
@@ -22,7 +23,8 @@ class SearchingRole:
         self.net = net.to(self.device).eval()
         self.two_player = spec.players == 2
         self.searcher = Searcher(self.net, cfg.search, cfg.value_support, cfg.reward_support,
-                                 self.two_player, self.device)
+                                 self.two_player, self.device,
+                                 rules=rules_for(spec) if cfg.tree_model == "rules" else None)
         self.rng = np.random.default_rng(seed)
         self.version = -1
 
