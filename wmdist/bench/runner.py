@@ -8,7 +8,8 @@ from typing import IO
 
 from wmdist.config.errors import ConfigError, closest
 
-BENCHES = ("mcts", "replay", "selfplay", "dreamer", "envs", "planner", "cmaes", "goal_planner", "reanalyze")
+BENCHES = ("mcts", "replay", "selfplay", "dreamer", "envs", "planner", "cmaes", "goal_planner", "reanalyze",
+           "subnormals")
 LONG = ("soak", "compile")  # run by name only: not part of `all` (minutes each)
 
 

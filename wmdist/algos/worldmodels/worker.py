@@ -25,6 +25,7 @@ class EvalWorker:
                  algo_config: WorldModelsConfig | None = None) -> None:
         if threads > 0:
             torch.set_num_threads(threads)
+        torch.set_flush_denormal(True)  # as every role (wmdist.runtime.roles.setup.set_threads)
         self.run_config, self.spec, self.index = run_config, spec, index
         self.cfg: WorldModelsConfig = algo_config if algo_config is not None else run_config.algo
         self.model_id = -1

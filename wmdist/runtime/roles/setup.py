@@ -13,12 +13,16 @@ def set_threads(n: int) -> None:
     """torch threads = this role's CPU share, so processes don't thrash a small machine.
 
     Also keeps freed memory mapped (`malloc.tune_malloc`): every role reallocates the same
-    tensors each step."""
+    tensors each step. And flushes subnormal floats to zero on the CPU (FTZ/DAZ, as
+    TensorFlow does by default): weight decay leaves trained weights and their gradients with
+    subnormals, which x86 cores compute through slow microcode assists; the connect-four
+    learner's update took 2x as long after 25 minutes of training (BENCHMARKS.md, subnormals)."""
     import torch
 
     from wmdist.runtime.malloc import tune_malloc
 
     tune_malloc()
+    torch.set_flush_denormal(True)  # False where the CPU lacks the flags (then nothing changes)
 
     torch.set_num_threads(max(1, int(n)))
     try:
