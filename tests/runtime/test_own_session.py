@@ -35,6 +35,9 @@ CHILD = textwrap.dedent("""
 RELAY = textwrap.dedent("""
     import signal, sys
     from wmdist.runtime.own_session import run_relayed
+    # start from a terminal's dispositions whatever ran the tests (nohup, a background job)
+    for s in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
+        signal.signal(s, signal.SIG_DFL)
     if sys.argv[3] == "nohup":
         signal.signal(signal.SIGHUP, signal.SIG_IGN)
     sys.exit(run_relayed([sys.executable, sys.argv[1], sys.argv[2]]))

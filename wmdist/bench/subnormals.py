@@ -64,6 +64,9 @@ def run(quick: bool = False, weights: str | None = None, planted: float = 0.001)
     import torch
 
     torch.set_num_threads(1)
+    # planting and counting need subnormals to exist: flushing (DAZ/FTZ, set by any role that ran in
+    # this process) would turn 1e-39 into 0, in torch and in numpy alike (the flags are the thread's)
+    torch.set_flush_denormal(False)
     fresh, other, spec = _nets(weights, planted)
     gen = torch.Generator().manual_seed(2)
     obs = (torch.rand((128, *spec.obs_shape), generator=gen) < 0.3).to(torch.uint8) * 255  # [B, 6, 7, 3]
