@@ -107,4 +107,6 @@ def kill(handle: Any) -> None:
         return
     import ray
 
-    ray.kill(handle, no_restart=True)
+    from wmdist.runtime.named import unwrap
+
+    ray.kill(unwrap(handle), no_restart=True)

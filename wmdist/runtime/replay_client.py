@@ -50,6 +50,7 @@ from wmdist.replay.storage_redis import (
 from wmdist.replay.shm import drop as drop_segment
 from wmdist.replay.shm import keep_with_process, segment_prefix, sweep
 from wmdist.runtime.calls import LocalHandle, actor_died, get, kill
+from wmdist.runtime.named import NamedHandle, actor_name
 from wmdist.runtime.replay_shm import ShmPath, StaleSegment, node_id
 
 
@@ -601,8 +602,8 @@ def create_replay(cfg: ReplayConfig, fields: dict[str, FieldSpec], run_dir: str,
             shards = [LocalHandle(shard_role.actor()(*a)) for a in shard_args]
             limiter = LocalHandle(limiter_role.actor()(*limiter_args))
         else:
-            shards = [_remote(shard_role, cfg).remote(*a) for a in shard_args]
-            limiter = _remote(limiter_role, cfg).remote(*limiter_args)
+            shards = [_named(shard_role, cfg, i, a) for i, a in enumerate(shard_args)]
+            limiter = _named(limiter_role, cfg, 0, limiter_args)
         sizes = get([s.mass.remote() for s in shards])  # also waits for redis shards to rebuild
     except Exception:
         if server is not None:
@@ -618,9 +619,12 @@ def create_replay(cfg: ReplayConfig, fields: dict[str, FieldSpec], run_dir: str,
     return ReplayClient(cfg, fields, shards, limiter, server, url, pwfile, namespaces, kept)
 
 
-def _remote(role, section: ReplayConfig):
-    """The Ray actor class of a replay role, with its table entry's resources and options."""
+def _named(role, section: ReplayConfig, i: int, args: tuple) -> NamedHandle:
+    """Actor i of a replay role, with its table entry's resources and options, under a name: the
+    client goes into restartable actors' constructors, where a name crosses and a handle would not
+    (`runtime/named.py`)."""
     import ray
 
-    opts = dict(role.resources(section).options(), max_restarts=role.max_restarts(None), **role.options)
-    return ray.remote(role.actor()).options(**opts)
+    name = actor_name(role.name, i)
+    opts = dict(role.resources(section).options(), max_restarts=role.max_restarts(None), name=name, **role.options)
+    return NamedHandle(name, ray.remote(role.actor()).options(**opts).remote(*args))

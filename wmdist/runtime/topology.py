@@ -19,6 +19,7 @@ from typing import Any
 from wmdist.config.schema import RunConfig
 from wmdist.envs.spec import EnvSpec
 from wmdist.runtime.calls import LocalHandle, get, kill
+from wmdist.runtime.named import NamedHandle, actor_name
 from wmdist.runtime.resources import BROKER_CPUS, check_fits
 from wmdist.runtime.table import Context, Role, RoleResources, by_name, run_roles
 
@@ -192,8 +193,10 @@ def build(cfg: RunConfig, spec: EnvSpec, run_dir: Path, fields: dict, local: boo
         here = NodeAffinitySchedulingStrategy(ray.get_runtime_context().get_node_id(), soft=False)
         # a broker whose process died is restarted, its calls retried there: it holds only the newest
         # snapshot's refs, and the learner's next publish (every learner.publish_every updates) refills it
-        broker = ray.remote(WeightBroker).options(num_cpus=BROKER_CPUS, scheduling_strategy=here, max_restarts=-1,
-                                                  max_task_retries=-1).remote()
+        # (named: it goes into restartable actors' constructors, where a handle would not cross, named.py)
+        name = actor_name("broker")
+        broker = NamedHandle(name, ray.remote(WeightBroker).options(
+            num_cpus=BROKER_CPUS, scheduling_strategy=here, max_restarts=-1, max_task_retries=-1, name=name).remote())
     topo = Topology(cfg, spec, run_dir, replay, broker, table, local=local)
     ctx = Context(cfg, spec, replay, broker, topo.actors)
     try:
