@@ -8,6 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from wmdist.algos.muzero.fast_conv import FastConvInference
 from wmdist.algos.muzero.fast_mlp import FastMLPInference
 from wmdist.algos.muzero.networks import MuZeroNet
 from wmdist.algos.muzero.rules_model import RulesModel
@@ -42,6 +43,9 @@ class Searcher:
         # the MLP network's recurrent call as flat functional ops (bit-identical, ~2x cheaper on the CPU);
         # None: the module path
         self.fast = FastMLPInference.build(net, value_support, reward_support) if self.on_host else None
+        # a conv network's BatchNorms folded into its convs (~1.2-1.4x cheaper on the CPU); for
+        # EfficientZero the base network under its value-prefix and consistency heads. None: the module path
+        self.conv = FastConvInference.build(getattr(net, "base", net)) if self.on_host else None
         # rules: the tree steps true positions and the network only evaluates them (algo.tree_model)
         self.rules_model = RulesModel(rules, self._evaluate) if rules is not None else None
         if cfg.value_prefix and not net.has_value_prefix:
@@ -55,8 +59,13 @@ class Searcher:
             s, h, c = (self._in(x) for x in latents)
             keep = torch.as_tensor(~np.asarray(reset, bool), device=self.device)[:, None].to(h.dtype)  # [B, 1]
             a = torch.as_tensor(np.asarray(actions), dtype=torch.int64, device=self.device)
-            nxt, (h2, c2), prefix_logits, p_logits, v_logits = self.net.recurrent_inference_prefix(
-                s, a, (h * keep, c * keep))
+            if self.conv is not None:  # EfficientZeroNet.recurrent_inference_prefix over the folded base
+                nxt, features = self.conv.transition(s, a)
+                prefix_logits, (h2, c2) = self.net.prefix(features, (h * keep, c * keep))
+                p_logits, v_logits = self.conv.predict(nxt)
+            else:
+                nxt, (h2, c2), prefix_logits, p_logits, v_logits = self.net.recurrent_inference_prefix(
+                    s, a, (h * keep, c * keep))
             prefix = support_to_scalar(prefix_logits.float(), self.reward_support).cpu().numpy()
             value = support_to_scalar(v_logits.float(), self.value_support).cpu().numpy()
             logits = p_logits.float().cpu().numpy()
@@ -71,7 +80,8 @@ class Searcher:
             return out
         with torch.no_grad():
             a = torch.as_tensor(np.asarray(actions), dtype=torch.int64, device=self.device)
-            nxt, r_logits, p_logits, v_logits = self.net.recurrent_inference(self._in(latents), a)
+            model = self.conv if self.conv is not None else self.net
+            nxt, r_logits, p_logits, v_logits = model.recurrent_inference(self._in(latents), a)
             reward = support_to_scalar(r_logits.float(), self.reward_support).cpu().numpy()
             value = support_to_scalar(v_logits.float(), self.value_support).cpu().numpy()
             logits = p_logits.float().cpu().numpy()
