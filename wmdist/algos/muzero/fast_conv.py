@@ -6,9 +6,9 @@ weights and a bias: w' = w * g / sqrt(var + eps), b' = beta - mean * g / sqrt(va
 with one-hot action planes; its action half is the same map for every latent, so it is a
 table [A, C, h, w] added after the latent half (the conv is linear in its input channels).
 A simulation's recurrent call then runs 2 + 2 x blocks convolutions with their biases and
-ReLUs, no BatchNorm and no concatenation. Measured on the MinAtar network (AMD EPYC, AVX2, one
-thread; BENCHMARKS.md, Self-play): the recurrent call 1.05-1.4x fewer CPU seconds, self-play
-1.04-1.17x more env steps per CPU second (`wmdist bench selfplay`); the convolutions' own
+ReLUs, no BatchNorm and no concatenation. Measured with the MinAtar presets (AMD EPYC, AVX2,
+one thread; BENCHMARKS.md, Self-play): self-play 1.13-1.15x more env steps per CPU second for
+MuZero, 1.08-1.10x for EfficientZero (`wmdist bench selfplay`); the convolutions' own
 arithmetic, which folding leaves as it is, is the rest. The arithmetic is the module's up to float rounding
 (tests/algos/muzero/test_fast_conv.py checks it against `ConvNet` in eval mode).
 
