@@ -194,3 +194,19 @@ def test_compare_prints_sustained_figures_per_run_and_group(tmp_path, capsys):
                          f"b={tmp_path / 'b'}"]) == 0
     rows = [json.loads(x) for x in capsys.readouterr().out.strip().splitlines()]
     assert [r["met"] for r in rows] == [False, True, 1]
+
+
+def test_a_run_name_given_with_set_names_the_runs_the_bench_then_finds(tmp_path, monkeypatch, capsys):
+    """`--set run.name=X` (the same preset on another game, say) once renamed the run away from
+    where the bench looked: the run trained, and the bench reported no run directory."""
+    def fake_train(cmd, **kw):  # as `wmdist train`: the last `run.name=` wins
+        sets = dict(x.split("=", 1) for x in cmd if "=" in x)
+        _curve(tmp_path / "runs" / f"{sets['run.name']}-20260101-000000" / "metrics.jsonl", [500, 500, 500])
+        return subprocess.CompletedProcess(cmd, 0, "", "")
+
+    monkeypatch.setattr(learning.subprocess, "run", fake_train)
+    assert learning.main([PRESET, "--seeds", "0", "--target", "475", "--png", str(tmp_path / "l.png"),
+                          "--runs-dir", str(tmp_path / "runs"), "--progress-seconds", "0",
+                          "--set", "run.name=other-game"]) == 0
+    rows = [json.loads(x) for x in capsys.readouterr().out.strip().splitlines()]
+    assert rows[0]["met"] and rows[0]["run_dir"].endswith("other-game-seed0-20260101-000000"), rows[0]

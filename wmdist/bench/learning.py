@@ -241,9 +241,14 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--progress-seconds", type=float, default=60.0,
                    help="print the running seed's env steps and last eval to stderr this often (0: never)")
     a = p.parse_args(argv)
-    for kv in a.set:  # `--set run.dir=X` would move the runs away from where they are looked for
+    base, sets = Path(a.config).stem, []
+    for kv in a.set:  # `--set run.dir=X` / `run.name=X` would move the runs away from where they are looked for
         if kv.startswith("run.dir="):
             a.runs_dir = kv.split("=", 1)[1]
+        if kv.startswith("run.name="):  # the runs' name; each seed's run is NAME-seedS, as without it
+            base = kv.split("=", 1)[1]
+            continue
+        sets.append(kv)
     budget_seconds = a.budget_minutes * 60 if a.budget_minutes is not None else None
     problem = argument_problem(a.target, a.budget_env_steps, a.budget_minutes) or config_problem(a.config, a.set, a.seeds)
     if problem:  # a bad config would fail every seed in turn: one line, exit 2, before any run
@@ -253,10 +258,10 @@ def main(argv: list[str] | None = None) -> int:
     runs: dict[int, Path] = {}
     results = []
     for seed in a.seeds:
-        name = f"{Path(a.config).stem}-seed{seed}"
+        name = f"{base}-seed{seed}"
         t0 = time.monotonic()
         cmd = [sys.executable, "-m", "wmdist.cli", "train", a.config, "--set", f"run.seed={seed}",
-               f"run.name={name}", f"run.dir={a.runs_dir}", "replay.seed=" + str(seed), *a.set]
+               f"run.name={name}", f"run.dir={a.runs_dir}", "replay.seed=" + str(seed), *sets]
         with Progress(seed, Path(a.runs_dir), name, a.progress_seconds):
             proc = subprocess.run(cmd, capture_output=True, text=True)
         wall = time.monotonic() - t0
