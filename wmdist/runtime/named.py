@@ -48,6 +48,12 @@ class NamedHandle:
         return f"NamedHandle({self.name!r})"
 
 
+def start_named(actor_class: Any, role: str, i: int, args: tuple, **options: Any) -> NamedHandle:
+    """Start actor i of `role` (a `ray.remote` class) under a fresh name; its NamedHandle."""
+    name = actor_name(role, i)
+    return NamedHandle(name, actor_class.options(name=name, **options).remote(*args))
+
+
 def unwrap(handle: Any) -> Any:
     """The Ray handle behind a NamedHandle (for `ray.kill`); anything else as it is."""
     return handle.handle if isinstance(handle, NamedHandle) else handle

@@ -50,7 +50,7 @@ from wmdist.replay.storage_redis import (
 from wmdist.replay.shm import drop as drop_segment
 from wmdist.replay.shm import keep_with_process, segment_prefix, sweep
 from wmdist.runtime.calls import LocalHandle, actor_died, get, kill
-from wmdist.runtime.named import NamedHandle, actor_name
+from wmdist.runtime.named import NamedHandle, start_named
 from wmdist.runtime.replay_shm import ShmPath, StaleSegment, node_id
 
 
@@ -625,6 +625,5 @@ def _named(role, section: ReplayConfig, i: int, args: tuple) -> NamedHandle:
     (`runtime/named.py`)."""
     import ray
 
-    name = actor_name(role.name, i)
-    opts = dict(role.resources(section).options(), max_restarts=role.max_restarts(None), name=name, **role.options)
-    return NamedHandle(name, ray.remote(role.actor()).options(**opts).remote(*args))
+    opts = dict(role.resources(section).options(), max_restarts=role.max_restarts(None), **role.options)
+    return start_named(ray.remote(role.actor()), role.name, i, args, **opts)

@@ -19,7 +19,7 @@ from typing import Any
 from wmdist.config.schema import RunConfig
 from wmdist.envs.spec import EnvSpec
 from wmdist.runtime.calls import LocalHandle, get, kill
-from wmdist.runtime.named import NamedHandle, actor_name
+from wmdist.runtime.named import start_named
 from wmdist.runtime.resources import BROKER_CPUS, check_fits
 from wmdist.runtime.table import Context, Role, RoleResources, by_name, run_roles
 
@@ -194,9 +194,8 @@ def build(cfg: RunConfig, spec: EnvSpec, run_dir: Path, fields: dict, local: boo
         # a broker whose process died is restarted, its calls retried there: it holds only the newest
         # snapshot's refs, and the learner's next publish (every learner.publish_every updates) refills it
         # (named: it goes into restartable actors' constructors, where a handle would not cross, named.py)
-        name = actor_name("broker")
-        broker = NamedHandle(name, ray.remote(WeightBroker).options(
-            num_cpus=BROKER_CPUS, scheduling_strategy=here, max_restarts=-1, max_task_retries=-1, name=name).remote())
+        broker = start_named(ray.remote(WeightBroker), "broker", 0, (), num_cpus=BROKER_CPUS, scheduling_strategy=here,
+                             max_restarts=-1, max_task_retries=-1)
     topo = Topology(cfg, spec, run_dir, replay, broker, table, local=local)
     ctx = Context(cfg, spec, replay, broker, topo.actors)
     try:

@@ -10,6 +10,8 @@ The authors' batch norm after the LSTM is left out (the search calls the head at
 """
 from __future__ import annotations
 
+from typing import Any
+
 import torch
 from torch import nn
 
@@ -92,9 +94,12 @@ class EfficientZeroNet(MuZeroNet):
         hidden = self.prefix.lstm.hidden_size
         return torch.zeros(batch, hidden, device=device), torch.zeros(batch, hidden, device=device)
 
-    def recurrent_inference_prefix(self, latent: torch.Tensor, action: torch.Tensor, state: LSTMState):
-        """(s^{k-1}, a^k, LSTM state) -> (s^k, new state, prefix logits, policy logits, value logits)."""
-        nxt, features = self.base.transition(latent, action)
+    def recurrent_inference_prefix(self, latent: torch.Tensor, action: torch.Tensor, state: LSTMState,
+                                   base: Any = None):
+        """(s^{k-1}, a^k, LSTM state) -> (s^k, new state, prefix logits, policy logits, value logits).
+        `base`: a stand-in for `self.base`'s transition and predict (the searcher's folded conv path)."""
+        base = self.base if base is None else base
+        nxt, features = base.transition(latent, action)
         prefix_logits, state = self.prefix(features, state)
-        logits, value = self.base.predict(nxt)
+        logits, value = base.predict(nxt)
         return nxt, state, prefix_logits, logits, value

@@ -59,13 +59,9 @@ class Searcher:
             s, h, c = (self._in(x) for x in latents)
             keep = torch.as_tensor(~np.asarray(reset, bool), device=self.device)[:, None].to(h.dtype)  # [B, 1]
             a = torch.as_tensor(np.asarray(actions), dtype=torch.int64, device=self.device)
-            if self.conv is not None:  # EfficientZeroNet.recurrent_inference_prefix over the folded base
-                nxt, features = self.conv.transition(s, a)
-                prefix_logits, (h2, c2) = self.net.prefix(features, (h * keep, c * keep))
-                p_logits, v_logits = self.conv.predict(nxt)
-            else:
-                nxt, (h2, c2), prefix_logits, p_logits, v_logits = self.net.recurrent_inference_prefix(
-                    s, a, (h * keep, c * keep))
+            over = {} if self.conv is None else {"base": self.conv}  # the folded conv base, else the network's own
+            nxt, (h2, c2), prefix_logits, p_logits, v_logits = self.net.recurrent_inference_prefix(
+                s, a, (h * keep, c * keep), **over)
             prefix = support_to_scalar(prefix_logits.float(), self.reward_support).cpu().numpy()
             value = support_to_scalar(v_logits.float(), self.value_support).cpu().numpy()
             logits = p_logits.float().cpu().numpy()
