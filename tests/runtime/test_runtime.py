@@ -41,6 +41,18 @@ def _complete_sequences_only(sample) -> None:
             assert sample.data["last"][row, n - 1]
 
 
+def _thread_nice_levels(pid: int) -> list[int]:
+    """The nice level of each thread of process `pid` (field 19 of /proc/PID/task/TID/stat)."""
+    levels = []
+    for tid in os.listdir(f"/proc/{pid}/task"):
+        try:
+            stat = Path(f"/proc/{pid}/task/{tid}/stat").read_text()
+        except FileNotFoundError:  # a thread that exited while we looked
+            continue
+        levels.append(int(stat.rsplit(")", 1)[1].split()[16]))  # fields after the command: state is 3rd, nice 19th
+    return levels
+
+
 class _EveryRoleDriver(Driver):
     """Runs past its update budget until every role has reported once (a loaded machine can
     finish 80 updates before the first reanalyze job returns), for at most two minutes."""
@@ -60,7 +72,7 @@ def test_full_topology_versions_reach_collectors_and_actions_follow_weights(ray_
     ray = ray_session
     # 80 updates end it; the minutes are a backstop (fake.yaml's 0.5 ended a loaded CI run at 7 updates)
     topo = _topology(tmp_path, "reanalyze.num=1", "eval.every_seconds=1", "run.max_updates=80", "replay.shards=2",
-                     "metrics.enabled=true", "run.max_minutes=3")
+                     "metrics.enabled=true", "run.max_minutes=3", "reanalyze.nice=5")
     tele = Telemetry(topo.cfg, topo.run_dir, open(os.devnull, "w"))
     try:
         driver = _EveryRoleDriver(topo, Counters(), on_tick=tele.update)
@@ -72,6 +84,10 @@ def test_full_topology_versions_reach_collectors_and_actions_follow_weights(ray_
         c = result.counters
         assert c.updates >= 80 and c.version >= 80 // 5
         assert c.env_steps > 0 and c.episodes > 0 and c.reanalyzed > 0 and c.eval_episodes > 0
+        # the reanalyzer works at reanalyze.nice above the learner, on every thread of its process
+        base = set(_thread_nice_levels(ray.get(topo.collectors[0].run_segment.remote())["pid"]))
+        levels = set(_thread_nice_levels(ray.get(topo.reanalyzers[0].run_job.remote())["pid"]))
+        assert len(base) == 1 and levels == {min(19, base.pop() + 5)}, (levels, base)
         # every collector pulls the newest version at its next segment boundary
         for col in topo.collectors:
             ray.get(col.run_segment.remote())

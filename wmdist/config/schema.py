@@ -67,6 +67,9 @@ class ReanalyzeConfig:
     resources: dict = param({}, "custom Ray resources per reanalyzer")
     batch_size: int = param(32, "sequences per reanalyze job", ge=1)
     fraction: float = param(0.8, "target share of learner samples carrying fresh targets (Reanalyze paper: 0.8)", ge=0, le=1)
+    nice: int = param(0, "OS nice level added to the reanalyzers' (0 = as the other roles): above 0 they use the CPU the "
+                         "learner and collectors leave idle instead of an equal share of it, so a busy reanalyzer no "
+                         "longer slows the learner that paces the run (wmdist/runtime/priority.py)", ge=0, le=19)
 
 
 @dataclass
