@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import io
 import json
+import os
 import sys
 from pathlib import Path
 
@@ -95,7 +96,9 @@ def _smoke_overrides(preset: str) -> list[str]:
 
 @pytest.mark.parametrize("preset", PRESETS)
 def test_every_preset_takes_its_first_steps_locally(preset, tmp_path):
-    """Collectors fill replay and the learner makes a first update, all in this process."""
+    """Collectors fill replay and the learner makes a first update, all in this process, whose
+    priority stays as it was (a role's `nice` is for its own Ray process)."""
+    before = os.getpriority(os.PRIO_PROCESS, 0)
     run = _run(tmp_path, str(CONFIGS / preset),
                [*_smoke_overrides(preset), "ray.local=true", "actors.num=1", "run.max_updates=1",
                 "run.max_env_steps=0", "run.max_minutes=2", "replay.min_size=32", "learner.batch_size=2",
@@ -104,3 +107,4 @@ def test_every_preset_takes_its_first_steps_locally(preset, tmp_path):
     records = [json.loads(line) for line in (run / "metrics.jsonl").read_text().splitlines()]
     assert max(r["updates"] for r in records) >= 1, records[-1]
     assert max(r["env_steps"] for r in records) > 0
+    assert os.getpriority(os.PRIO_PROCESS, 0) == before

@@ -84,6 +84,10 @@ def test_full_topology_versions_reach_collectors_and_actions_follow_weights(ray_
         c = result.counters
         assert c.updates >= 80 and c.version >= 80 // 5
         assert c.env_steps > 0 and c.episodes > 0 and c.reanalyzed > 0 and c.eval_episodes > 0
+        # the train lines say what the reanalyzers did against the learner's samples, and each role's busy time
+        last = driver._work_counts()
+        assert 0 < last["reanalyzed"] == c.reanalyzed and 0 < last["sampled_sequences"], last
+        assert last["busy/learner"] > 0 and last["busy/collector"] > 0, last
         # the reanalyzer works at reanalyze.nice above the learner, on every thread of its process
         base = set(_thread_nice_levels(ray.get(topo.collectors[0].run_segment.remote())["pid"]))
         levels = set(_thread_nice_levels(ray.get(topo.reanalyzers[0].run_job.remote())["pid"]))

@@ -452,6 +452,15 @@ class Driver:
     def _rate_counts(self) -> dict[str, float]:
         return {"env_steps": float(self.c.env_steps), "updates": float(self.c.updates)}
 
+    def _work_counts(self) -> dict:
+        """For the train line: what reanalyzers did against what the learner sampled (their paced share),
+        and each role's busy seconds so far (where the machine's time went)."""
+        c = self.c
+        out = {f"busy/{role}": round(sec, 1) for role, sec in c.busy.items() if sec > 0}
+        if self.cfg.reanalyze.num:
+            out.update(reanalyzed=c.reanalyzed, sampled_sequences=c.sampled_sequences)
+        return out
+
     def tick(self, force_plot: bool = False) -> dict:
         now = time.monotonic()
         self.rates = self._rates.update(now, self._rate_counts())
@@ -465,7 +474,7 @@ class Driver:
         self._log({"kind": "train", "train_return": snap["train_return"], "version": snap["version"],
                    "env_steps_per_second": round(snap["env_steps_per_second"], 2),
                    "updates_per_second": round(snap["updates_per_second"], 3),
-                   **{f"loss/{k}": v for k, v in snap["losses"].items()}})
+                   **{f"loss/{k}": v for k, v in snap["losses"].items()}, **self._work_counts()})
         if self.on_tick is not None:
             self.on_tick(snap)
         if self.plot is not None and (force_plot or now - self.last_plot >= self.cfg.run.plot_every_seconds):

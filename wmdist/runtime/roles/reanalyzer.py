@@ -8,14 +8,16 @@ from typing import Any
 from wmdist.config.schema import RunConfig
 from wmdist.envs.spec import EnvSpec
 from wmdist.runtime.priority import lower_priority
-from wmdist.runtime.roles.setup import build_algorithm, device_for, process_tag, set_threads
+from wmdist.runtime.roles.setup import build_algorithm, device_for, in_ray_actor, process_tag, set_threads
 from wmdist.runtime.roles.weights import pull
 
 
 class ReanalyzerRole:
     def __init__(self, cfg: RunConfig, spec: EnvSpec, index: int, replay: Any, broker: Any, threads: int = 1) -> None:
         set_threads(threads)
-        self.nice = lower_priority(cfg.reanalyze.nice)  # before torch starts its pool: new threads inherit it
+        # its own process only (the local runner runs every role in one); before torch starts its pool
+        self.by = cfg.reanalyze.nice if in_ray_actor() else 0
+        self.nice = lower_priority(self.by)
         self.tag = process_tag()  # who answers (the driver counts restarts by it)
         self.cfg, self.replay, self.broker = cfg, replay, broker
         algo = build_algorithm(cfg, spec, cfg.run.seed + 7_777 + index)
@@ -28,8 +30,8 @@ class ReanalyzerRole:
     def run_job(self) -> dict:
         """One batch: returns how many sequences got fresh targets."""
         t0 = time.monotonic()
-        if self.cfg.reanalyze.nice:  # the thread Ray runs calls on may not be the constructor's
-            lower_priority(self.cfg.reanalyze.nice, base=self.nice - self.cfg.reanalyze.nice)
+        if self.by:  # the thread Ray runs calls on may not be the constructor's
+            lower_priority(self.by, base=self.nice - self.by)
         version, weights = pull(self.broker, self.version)
         if weights is not None:
             self.reanalyzer.set_weights(weights, version)

@@ -72,6 +72,19 @@ def was_restarted() -> bool:
         return False
 
 
+def in_ray_actor() -> bool:
+    """True inside a Ray actor's own process; False in the local runner, where every role shares
+    the caller's process (a setting for one role's process must not change the others')."""
+    try:
+        import ray
+
+        if not ray.is_initialized():
+            return False
+        return ray.get_runtime_context().get_actor_id() is not None
+    except Exception:  # noqa: BLE001 - no Ray here
+        return False
+
+
 def process_tag() -> dict:
     """Who answered: the driver counts a restart when a new process answers for an actor, or
     when the first process it hears from is already a replacement (killed during start-up,
